@@ -1,0 +1,1 @@
+//! graph-service crate.
