@@ -1,0 +1,293 @@
+//! Ant fidelity protocol, rapier side. Prints one JSON object to compare with
+//! `scripts/fidelity/mujoco_fidelity.py`, which runs the same protocol in MuJoCo.
+//!
+//! Run: `cargo run --release -p envs --example fidelity [-- [--episodes N] [key=value ...]]`.
+//! `key=value` overrides one Ant parameter for tuning experiments, e.g. `solver.substeps=4`
+//! (see [`apply_override`] for the keys). Without arguments it runs the full protocol with the
+//! default parameters.
+//!
+//! Protocol (shared with the MuJoCo script; actions in actuator order hip_4, ankle_4, hip_1,
+//! ankle_1, hip_2, ankle_2, hip_3, ankle_3):
+//! 1. gait: from qpos0 with zero velocity, 50 control steps; at step t, τ = 0.2 t, legs 1 and 3
+//!    have phase 0 and legs 2 and 4 phase π; hip = 16 sin(2πτ + p), ankle = 16 cos(2πτ + p).
+//!    Reports the final torso dx, dy, |dxy|, yaw (deg) and z.
+//! 2. random: episodes e = 0..999, SplitMix64(e); qpos = qpos0 + 0.1 (2u − 1) on all 15
+//!    entries, quaternion normalised, qvel = 0; 100 control steps of 16 (2u − 1) per actuator.
+//!    Reports mean, std, median, p10, p90 of the final xy distance from the post-reset xy, and
+//!    the fraction of episodes with torso z < 0.3 at the end of any control step.
+//! 3. limit: from qpos0, 50 control steps with +16 on hip_1 (then on ankle_1) and 0 elsewhere;
+//!    reports that hinge's angle (deg) averaged over the last 10 control steps.
+//! Timing: control steps per second over 2000 control steps of random actions (SplitMix64
+//!    seed 12345, drawn before the clock starts), single thread, median of 5 runs.
+
+use std::time::Instant;
+
+use envs::ant::{Ant, AntParams, N_JOINTS, QPOS_DIM, QVEL_DIM};
+use envs::{EnvError, Robot};
+
+/// Gait test length and its phase clock: τ = GAIT_TAU_PER_STEP · t.
+const GAIT_STEPS: usize = 50;
+const GAIT_TAU_PER_STEP: f64 = 0.2;
+/// Random test size.
+const RANDOM_EPISODES: u64 = 1000;
+const RANDOM_STEPS: usize = 100;
+/// Torso height below which an episode counts as flipped (the fall penalty's lower bound).
+const FLIP_Z_M: f32 = 0.3;
+/// Limit test length and the tail averaged.
+const LIMIT_STEPS: usize = 50;
+const LIMIT_TAIL: usize = 10;
+/// Timing run.
+const TIMING_STEPS: usize = 2000;
+const TIMING_REPEATS: usize = 5;
+const TIMING_SEED: u64 = 12345;
+/// Actuator indices (reference order) of hip_1 and ankle_1, and their hinge indices in qpos.
+const ACTUATOR_HIP_1: usize = 2;
+const ACTUATOR_ANKLE_1: usize = 3;
+const QPOS_HIP_1: usize = 7;
+const QPOS_ANKLE_1: usize = 8;
+
+/// SplitMix64, the generator both sides of the protocol share.
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1) from the top 53 bits.
+    fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in [−scale, scale).
+    fn symmetric(&mut self, scale: f64) -> f64 {
+        scale * (2.0 * self.uniform() - 1.0)
+    }
+}
+
+fn main() -> Result<(), EnvError> {
+    let (params, episodes) = parse_args()?;
+    let mass = Ant::new(params.clone(), &[])?.total_mass();
+    let gait = gait(&params)?;
+    let random = random(&params, episodes)?;
+    let hip1 = hold(&params, ACTUATOR_HIP_1, QPOS_HIP_1)?;
+    let ankle1 = hold(&params, ACTUATOR_ANKLE_1, QPOS_ANKLE_1)?;
+    let rate = steps_per_sec(&params)?;
+    println!(
+        "{{\"engine\":\"rapier\",\"mass\":{mass},\"gait\":{gait},\"random\":{random},\
+         \"limit\":{{\"hip1_deg\":{hip1},\"ankle1_deg\":{ankle1}}},\"steps_per_sec\":{rate}}}"
+    );
+    Ok(())
+}
+
+/// Reads `--episodes N` and `key=value` overrides.
+fn parse_args() -> Result<(AntParams, u64), EnvError> {
+    let mut params = AntParams::default();
+    let mut episodes = RANDOM_EPISODES;
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        if arg == "--episodes" {
+            let value = args.next().unwrap_or_default();
+            episodes = value.parse().map_err(|_| bad_arg("--episodes", &value))?;
+        } else if let Some((key, value)) = arg.split_once('=') {
+            apply_override(&mut params, key, value)?;
+        } else {
+            return Err(bad_arg(&arg, ""));
+        }
+    }
+    params.validate()?;
+    Ok((params, episodes))
+}
+
+/// Sets one tunable parameter from text.
+fn apply_override(params: &mut AntParams, key: &str, value: &str) -> Result<(), EnvError> {
+    let float = || value.parse::<f32>().map_err(|_| bad_arg(key, value));
+    let count = || value.parse::<usize>().map_err(|_| bad_arg(key, value));
+    let solver = &mut params.solver;
+    match key {
+        "timestep_secs" => params.timestep_secs = float()?,
+        "frame_skip" => params.frame_skip = count()? as u32,
+        "friction" => params.friction = float()?,
+        "solver.substeps" => solver.substeps = count()?,
+        "solver.pgs_iterations" => solver.pgs_iterations = count()?,
+        "solver.stabilization_iterations" => solver.stabilization_iterations = count()?,
+        "solver.contact_frequency_hz" => solver.contact_frequency_hz = float()?,
+        "solver.contact_damping_ratio" => solver.contact_damping_ratio = float()?,
+        "solver.contact_skin_m" => solver.contact_skin_m = float()?,
+        "solver.joint_limit_frequency_hz" => solver.joint_limit_frequency_hz = float()?,
+        "solver.joint_limit_damping_ratio" => solver.joint_limit_damping_ratio = float()?,
+        "solver.max_corrective_velocity_m_s" => solver.max_corrective_velocity_m_s = float()?,
+        _ => return Err(bad_arg(key, value)),
+    }
+    Ok(())
+}
+
+fn bad_arg(key: &str, value: &str) -> EnvError {
+    EnvError::InvalidParam {
+        field: key.to_string(),
+        value: value.to_string(),
+        reason: "unknown argument or unparsable value (see envs/examples/fidelity.rs)".into(),
+    }
+}
+
+/// An ant at qpos0 with zero velocity.
+fn ant_at_rest(params: &AntParams) -> Result<Ant, EnvError> {
+    Ant::new(params.clone(), &[])
+}
+
+/// Test 1: the fixed sinusoidal gait.
+fn gait(params: &AntParams) -> Result<String, EnvError> {
+    let mut ant = ant_at_rest(params)?;
+    let [x0, y0] = ant.xy();
+    let phases = [0.0, std::f64::consts::PI, 0.0, std::f64::consts::PI];
+    for t in 0..GAIT_STEPS {
+        let tau = GAIT_TAU_PER_STEP * t as f64;
+        let mut joint_torques = [0.0f32; N_JOINTS];
+        for (leg, phase) in phases.iter().enumerate() {
+            let angle = std::f64::consts::TAU * tau + phase;
+            joint_torques[2 * leg] = (f64::from(params.ctrl_range) * angle.sin()) as f32;
+            joint_torques[2 * leg + 1] = (f64::from(params.ctrl_range) * angle.cos()) as f32;
+        }
+        ant.step(&to_actuator_order(&joint_torques));
+    }
+    let qpos = ant.qpos();
+    let (dx, dy) = (f64::from(qpos[0] - x0), f64::from(qpos[1] - y0));
+    Ok(format!(
+        "{{\"dx\":{dx},\"dy\":{dy},\"dist\":{},\"yaw_deg\":{},\"z\":{}}}",
+        dx.hypot(dy),
+        yaw_deg(&qpos),
+        qpos[2]
+    ))
+}
+
+/// Reorders per-hinge values (observation order) into actuator order.
+fn to_actuator_order(joint_values: &[f32; N_JOINTS]) -> [f32; N_JOINTS] {
+    let mut action = [0.0; N_JOINTS];
+    for (actuator, joint) in envs::ant::ACTUATOR_TO_JOINT.iter().enumerate() {
+        action[actuator] = joint_values[*joint];
+    }
+    action
+}
+
+/// Heading about z (deg) from the qpos quaternion (w, x, y, z).
+fn yaw_deg(qpos: &[f32; QPOS_DIM]) -> f64 {
+    let [w, x, y, z] = [qpos[3], qpos[4], qpos[5], qpos[6]].map(f64::from);
+    (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z)).to_degrees()
+}
+
+/// Test 2: random torques from noisy starts.
+fn random(params: &AntParams, episodes: u64) -> Result<String, EnvError> {
+    let mut ant = ant_at_rest(params)?;
+    let mut distances = Vec::with_capacity(episodes as usize);
+    let mut n_flipped = 0u64;
+    for episode in 0..episodes {
+        let (distance, flipped) = random_episode(&mut ant, params, episode);
+        distances.push(distance);
+        n_flipped += u64::from(flipped);
+    }
+    let stats = Stats::of(&mut distances);
+    Ok(format!(
+        "{{\"mean\":{},\"std\":{},\"median\":{},\"p10\":{},\"p90\":{},\"flip_frac\":{}}}",
+        stats.mean,
+        stats.std,
+        stats.median,
+        stats.p10,
+        stats.p90,
+        n_flipped as f64 / episodes as f64
+    ))
+}
+
+/// One random episode: returns (final xy distance from the start, whether it flipped).
+fn random_episode(ant: &mut Ant, params: &AntParams, episode: u64) -> (f64, bool) {
+    let mut rng = SplitMix64(episode);
+    let noise = f64::from(params.reset_qpos_noise);
+    let qpos0 = params.qpos0();
+    let mut qpos = [0.0f32; QPOS_DIM];
+    for (value, base) in qpos.iter_mut().zip(qpos0) {
+        *value = (f64::from(base) + rng.symmetric(noise)) as f32;
+    }
+    ant.rebuild();
+    ant.set_state(&qpos, &[0.0; QVEL_DIM]);
+    let [x0, y0] = ant.xy();
+    let mut flipped = false;
+    for _ in 0..RANDOM_STEPS {
+        let action: [f32; N_JOINTS] =
+            std::array::from_fn(|_| rng.symmetric(f64::from(params.ctrl_range)) as f32);
+        ant.step(&action);
+        flipped |= ant.torso_z().is_some_and(|z| z < FLIP_Z_M);
+    }
+    let [x, y] = ant.xy();
+    (f64::from(x - x0).hypot(f64::from(y - y0)), flipped)
+}
+
+/// Summary statistics with numpy's conventions (population std, linear percentiles).
+struct Stats {
+    mean: f64,
+    std: f64,
+    median: f64,
+    p10: f64,
+    p90: f64,
+}
+
+impl Stats {
+    fn of(values: &mut [f64]) -> Stats {
+        values.sort_by(f64::total_cmp);
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        Stats {
+            mean,
+            std: variance.sqrt(),
+            median: percentile(values, 50.0),
+            p10: percentile(values, 10.0),
+            p90: percentile(values, 90.0),
+        }
+    }
+}
+
+/// Linear-interpolation percentile of sorted values (numpy's default method).
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    let rank = q / 100.0 * (sorted.len() - 1) as f64;
+    let low = rank.floor() as usize;
+    let high = rank.ceil() as usize;
+    sorted[low] + (rank - low as f64) * (sorted[high] - sorted[low])
+}
+
+/// Test 3: +ctrl_range on one actuator; mean angle (deg) of its hinge over the last steps.
+fn hold(params: &AntParams, actuator: usize, qpos_index: usize) -> Result<f64, EnvError> {
+    let mut ant = ant_at_rest(params)?;
+    let mut action = [0.0; N_JOINTS];
+    action[actuator] = params.ctrl_range;
+    let mut tail_sum = 0.0;
+    for step in 0..LIMIT_STEPS {
+        ant.step(&action);
+        if step >= LIMIT_STEPS - LIMIT_TAIL {
+            tail_sum += f64::from(ant.qpos()[qpos_index]);
+        }
+    }
+    Ok((tail_sum / LIMIT_TAIL as f64).to_degrees())
+}
+
+/// Control steps per second of random actions, median of several runs.
+fn steps_per_sec(params: &AntParams) -> Result<f64, EnvError> {
+    let mut rng = SplitMix64(TIMING_SEED);
+    let ctrl_range = f64::from(params.ctrl_range);
+    let actions: Vec<[f32; N_JOINTS]> = (0..TIMING_STEPS)
+        .map(|_| std::array::from_fn(|_| rng.symmetric(ctrl_range) as f32))
+        .collect();
+    let mut rates = Vec::with_capacity(TIMING_REPEATS);
+    for _ in 0..TIMING_REPEATS {
+        let mut ant = ant_at_rest(params)?;
+        let start = Instant::now();
+        for action in &actions {
+            ant.step(action);
+        }
+        rates.push(TIMING_STEPS as f64 / start.elapsed().as_secs_f64());
+    }
+    rates.sort_by(f64::total_cmp);
+    Ok(rates[TIMING_REPEATS / 2])
+}
