@@ -1,0 +1,136 @@
+//! Builds tasks by registry name (`antmaze-u`, `pointmaze-s-test`, …).
+//!
+//! Names are looked up in one table ([`TASKS`]) that maps each to a typed [`Task`]; nothing
+//! dispatches on string prefixes. Every maze task exists for the Ant and the point mass, in a
+//! training variant (sampled goals) and a `-test` variant (fixed evaluation goal, ends on
+//! success). Tasks without a maze (the half-cheetah hurdle of `envs::cheetah`) get their own
+//! [`Task`] variant and table rows; they are not maze robots, so they have no [`RobotKind`].
+
+use crate::ant::{Ant, AntParams};
+use crate::api::{Env, EnvError};
+use crate::maze::{Maze, MazeLayout};
+use crate::maze_env::{MazeEnv, MazeTaskParams, Variant};
+use crate::point::{PointMass, PointParams};
+
+/// The robot of a maze task.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RobotKind {
+    /// The rllab/HIRO Ant (29-D obs, 8 torques ±16 N·m), as in the paper.
+    Ant,
+    /// The force-controlled ball of [`crate::point`] (4-D obs, 2-D force in [−1, 1]); ours.
+    Point,
+}
+
+/// A maze task: which robot, which maze, which variant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TaskId {
+    pub robot: RobotKind,
+    pub layout: MazeLayout,
+    pub variant: Variant,
+}
+
+/// What a registry name stands for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Task {
+    /// A robot in one of the mazes.
+    Maze(TaskId),
+}
+
+const fn maze(robot: RobotKind, layout: MazeLayout, variant: Variant) -> Task {
+    Task::Maze(TaskId { robot, layout, variant })
+}
+
+use MazeLayout::{FourRooms, S, U, W};
+use RobotKind::{Ant as A, Point as P};
+use Variant::{Test, Train};
+
+/// Every registered task name with what it builds.
+pub const TASKS: &[(&str, Task)] = &[
+    ("antmaze-u", maze(A, U, Train)),
+    ("antmaze-u-test", maze(A, U, Test)),
+    ("antmaze-s", maze(A, S, Train)),
+    ("antmaze-s-test", maze(A, S, Test)),
+    ("antmaze-w", maze(A, W, Train)),
+    ("antmaze-w-test", maze(A, W, Test)),
+    ("ant-fourrooms", maze(A, FourRooms, Train)),
+    ("ant-fourrooms-test", maze(A, FourRooms, Test)),
+    ("pointmaze-u", maze(P, U, Train)),
+    ("pointmaze-u-test", maze(P, U, Test)),
+    ("pointmaze-s", maze(P, S, Train)),
+    ("pointmaze-s-test", maze(P, S, Test)),
+    ("pointmaze-w", maze(P, W, Train)),
+    ("pointmaze-w-test", maze(P, W, Test)),
+    ("pointmaze-fourrooms", maze(P, FourRooms, Train)),
+    ("pointmaze-fourrooms-test", maze(P, FourRooms, Test)),
+];
+
+/// All registered task names, in table order.
+pub fn task_names() -> Vec<&'static str> {
+    TASKS.iter().map(|(name, _)| *name).collect()
+}
+
+/// The task a name stands for; [`EnvError::UnknownTask`] (listing the known names) otherwise.
+pub fn parse_task(name: &str) -> Result<Task, EnvError> {
+    TASKS
+        .iter()
+        .find(|(known, _)| *known == name)
+        .map(|(_, task)| *task)
+        .ok_or_else(|| EnvError::UnknownTask { name: name.to_string(), known: task_names().join(", ") })
+}
+
+/// The registry name of a task (inverse of [`parse_task`]).
+pub fn task_name(task: Task) -> &'static str {
+    TASKS
+        .iter()
+        .find(|(_, t)| *t == task)
+        .map(|(name, _)| *name)
+        .expect("every Task value has a row in TASKS (checked by tests/registry.rs)")
+}
+
+/// Builds a task by name with default parameters.
+pub fn make(name: &str) -> Result<Box<dyn Env>, EnvError> {
+    match parse_task(name)? {
+        Task::Maze(id) => make_maze(id, &MazeRobotParams::default(), MazeTaskParams::default()),
+    }
+}
+
+/// Robot parameters for maze tasks; only the one matching the task's robot is used.
+#[derive(Debug, Clone, Default)]
+pub struct MazeRobotParams {
+    pub ant: AntParams,
+    pub point: PointParams,
+}
+
+/// Builds a maze task with explicit parameters.
+pub fn make_maze(id: TaskId, robot: &MazeRobotParams, task: MazeTaskParams) -> Result<Box<dyn Env>, EnvError> {
+    Ok(match id.robot {
+        RobotKind::Ant => Box::new(make_ant_maze(id.layout, id.variant, robot.ant.clone(), task)?),
+        RobotKind::Point => Box::new(make_point_maze(id.layout, id.variant, robot.point, task)?),
+    })
+}
+
+/// The Ant in `layout`, as a concrete type (no dynamic dispatch).
+pub fn make_ant_maze(
+    layout: MazeLayout,
+    variant: Variant,
+    params: AntParams,
+    task: MazeTaskParams,
+) -> Result<MazeEnv<Ant>, EnvError> {
+    let id = TaskId { robot: RobotKind::Ant, layout, variant };
+    let maze = Maze::new(layout);
+    let ant = Ant::new(params, &maze.walls())?;
+    MazeEnv::new(task_name(Task::Maze(id)), maze, ant, variant, task)
+}
+
+/// The point mass in `layout`, as a concrete type (no dynamic dispatch).
+pub fn make_point_maze(
+    layout: MazeLayout,
+    variant: Variant,
+    params: PointParams,
+    task: MazeTaskParams,
+) -> Result<MazeEnv<PointMass>, EnvError> {
+    let id = TaskId { robot: RobotKind::Point, layout, variant };
+    let maze = Maze::new(layout);
+    let point = PointMass::new(params, &maze.walls())?;
+    MazeEnv::new(task_name(Task::Maze(id)), maze, point, variant, task)
+}
