@@ -97,7 +97,7 @@ fn open_services<T, H>(
 ) -> Result<(SliceService<T, H>, EventService), TransportError>
 where
     T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + ZeroCopySend + 'static,
+    H: Debug + Default + ZeroCopySend + 'static,
 {
     let sn = service_name(name)?;
     let open_err = |e: &dyn Debug| TransportError::Open { service: name.to_owned(), reason: format!("{e:?}") };
@@ -125,7 +125,7 @@ where
 pub struct SlicePublisher<T, H>
 where
     T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + ZeroCopySend + 'static,
+    H: Debug + Default + ZeroCopySend + 'static,
 {
     name: String,
     max_slice_len: usize,
@@ -136,7 +136,7 @@ where
 impl<T, H> SlicePublisher<T, H>
 where
     T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + ZeroCopySend + 'static,
+    H: Debug + Default + ZeroCopySend + 'static,
 {
     pub fn open(
         node: &Node<Ipc>,
@@ -186,7 +186,7 @@ where
 pub struct SliceSubscriber<T, H>
 where
     T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + ZeroCopySend + 'static,
+    H: Debug + Default + ZeroCopySend + 'static,
 {
     name: String,
     subscriber: Subscriber<Ipc, [T], H>,
@@ -196,7 +196,7 @@ where
 impl<T, H> SliceSubscriber<T, H>
 where
     T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + ZeroCopySend + 'static,
+    H: Debug + Default + ZeroCopySend + 'static,
 {
     pub fn open(node: &Node<Ipc>, name: &str, shape: &ChannelShape) -> Result<Self, TransportError> {
         let (data, events) = open_services::<T, H>(node, name, shape)?;

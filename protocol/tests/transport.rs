@@ -1,0 +1,68 @@
+//! Transport round trips over real iceoryx2 shared memory, two nodes in one process.
+//! Each test uses a unique service name so parallel tests never see each other.
+
+use std::time::Duration;
+
+use iceoryx2::prelude::*;
+use ::protocol::transport::{open_node, Backpressure, ChannelShape, SlicePublisher, SliceSubscriber, TransportError};
+
+#[derive(Debug, Default, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("TestHeader")]
+#[repr(C)]
+struct TestHeader {
+    chunk: u64,
+    n: u32,
+}
+
+fn unique(name: &str) -> String {
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
+    format!("asi-test/{}/{nanos}/{name}", std::process::id())
+}
+
+const SHAPE: ChannelShape =
+    ChannelShape { max_slice_len: 64, subscriber_buffer: 16, history: 0, max_publishers: 2, max_subscribers: 2 };
+
+#[test]
+fn slices_and_headers_arrive_intact_and_in_order() {
+    let service = unique("order");
+    let node_a = open_node("test-pub").unwrap();
+    let node_b = open_node("test-sub").unwrap();
+    let subscriber = SliceSubscriber::<f32, TestHeader>::open(&node_b, &service, &SHAPE).unwrap();
+    let publisher = SlicePublisher::<f32, TestHeader>::open(&node_a, &service, &SHAPE, Backpressure::Discard).unwrap();
+
+    for chunk in 0..5u64 {
+        let payload: Vec<f32> = (0..(chunk as usize + 1) * 3).map(|i| i as f32 + chunk as f32 * 0.5).collect();
+        let delivered = publisher.send(TestHeader { chunk, n: payload.len() as u32 }, &payload).unwrap();
+        assert_eq!(delivered, 1);
+    }
+    let mut seen = Vec::new();
+    subscriber
+        .wait_and_drain(Duration::from_secs(5), |h, p| {
+            assert_eq!(h.n as usize, p.len());
+            assert_eq!(p[0], h.chunk as f32 * 0.5);
+            seen.push(h.chunk);
+        })
+        .unwrap();
+    assert_eq!(seen, vec![0, 1, 2, 3, 4]);
+}
+
+#[test]
+fn a_payload_longer_than_the_channel_is_an_error_not_a_panic() {
+    let service = unique("too-long");
+    let node = open_node("test-long").unwrap();
+    let publisher = SlicePublisher::<f32, TestHeader>::open(&node, &service, &SHAPE, Backpressure::Discard).unwrap();
+    let err = publisher.send(TestHeader::default(), &[0.0; 65]).unwrap_err();
+    assert!(matches!(err, TransportError::TooLong { len: 65, max: 64, .. }), "{err}");
+}
+
+#[test]
+fn a_full_subscriber_never_blocks_a_discarding_publisher() {
+    let service = unique("full");
+    let node = open_node("test-full").unwrap();
+    let _subscriber = SliceSubscriber::<f32, TestHeader>::open(&node, &service, &SHAPE).unwrap();
+    let publisher = SlicePublisher::<f32, TestHeader>::open(&node, &service, &SHAPE, Backpressure::Discard).unwrap();
+    // Twice the subscriber's buffer, never drained: every send must return.
+    for chunk in 0..(2 * SHAPE.subscriber_buffer as u64) {
+        publisher.send(TestHeader { chunk, n: 1 }, &[1.0]).unwrap();
+    }
+}
