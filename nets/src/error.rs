@@ -1,7 +1,7 @@
 //! The one error enum of the `nets` crate.
 //!
 //! Every variant names what it is about (a layer, a tensor) and carries the dimensions involved,
-//! so that a shape bug reads as "layer `high.policy.trunk.l0`: expected input dim 31, got 29"
+//! so that a shape bug reads as "high_policy.trunk.l0: expected input features = 31, got 29"
 //! rather than a bare candle error.
 
 use thiserror::Error;

@@ -25,7 +25,8 @@ use crate::init::LinearInit;
 #[derive(Clone, Debug)]
 pub struct Linear {
     weight: Tensor,
-    /// The bias as a `[1, out]` row, ready for the `1 · bᵀ` product.
+    bias: Tensor,
+    /// The bias as a `[1, out]` row (a view of `bias`), ready for the `1 · bᵀ` product.
     bias_row: Tensor,
     name: String,
     in_dim: usize,
@@ -37,9 +38,11 @@ impl Linear {
     pub fn new(vb: &VarBuilder, in_dim: usize, out_dim: usize, init: LinearInit) -> Result<Self> {
         let weight = vb.get_with_hints((out_dim, in_dim), "weight", init.weight(in_dim, out_dim))?;
         let bias = vb.get_with_hints(out_dim, "bias", init.bias(in_dim))?;
+        let bias_row = bias.unsqueeze(0)?;
         Ok(Self {
             weight,
-            bias_row: bias.unsqueeze(0)?,
+            bias,
+            bias_row,
             name: vb.prefix(),
             in_dim,
             out_dim,
@@ -64,7 +67,17 @@ impl Linear {
         self.out_dim
     }
 
-    /// The parameter prefix, e.g. `high.policy.trunk.l0`.
+    /// The weight `W: [out, in]`.
+    pub fn weight(&self) -> &Tensor {
+        &self.weight
+    }
+
+    /// The bias `b: [out]`.
+    pub fn bias(&self) -> &Tensor {
+        &self.bias
+    }
+
+    /// The parameter prefix, e.g. `high_policy.trunk.l0`.
     pub fn name(&self) -> &str {
         &self.name
     }
