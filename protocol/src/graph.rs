@@ -29,12 +29,18 @@ pub fn encode<T: Serialize>(value: &T) -> Result<Vec<u8>, ProtocolError> {
 /// Decodes a postcard `T` that must span all of `bytes`.
 pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ProtocolError> {
     let what = std::any::type_name::<T>();
-    let (value, rest) = postcard::take_from_bytes::<T>(bytes)
-        .map_err(|err| ProtocolError::Decode { what, message: err.to_string() })?;
+    let (value, rest) =
+        postcard::take_from_bytes::<T>(bytes).map_err(|err| ProtocolError::Decode {
+            what,
+            message: err.to_string(),
+        })?;
     if rest.is_empty() {
         Ok(value)
     } else {
-        Err(ProtocolError::Decode { what, message: format!("{} trailing bytes after the message", rest.len()) })
+        Err(ProtocolError::Decode {
+            what,
+            message: format!("{} trailing bytes after the message", rest.len()),
+        })
     }
 }
 
@@ -69,7 +75,12 @@ impl TryFrom<u32> for GraphRequestKind {
             5 => GraphRequestKind::ReportReaching,
             6 => GraphRequestKind::Stats,
             7 => GraphRequestKind::Dump,
-            _ => return Err(ProtocolError::UnknownCode { what: "graph request kind", code }),
+            _ => {
+                return Err(ProtocolError::UnknownCode {
+                    what: "graph request kind",
+                    code,
+                })
+            }
         })
     }
 }
@@ -99,7 +110,12 @@ impl TryFrom<u32> for GraphStatus {
             2 => GraphStatus::InvalidRequest,
             3 => GraphStatus::VersionMismatch,
             4 => GraphStatus::Internal,
-            _ => return Err(ProtocolError::UnknownCode { what: "graph status", code }),
+            _ => {
+                return Err(ProtocolError::UnknownCode {
+                    what: "graph status",
+                    code,
+                })
+            }
         })
     }
 }
@@ -122,7 +138,12 @@ pub struct GraphRequestHeader {
 impl GraphRequestHeader {
     /// A header for `kind`, current protocol version.
     pub fn new(request_id: u64, kind: GraphRequestKind, phi_version: PhiVersion) -> Self {
-        Self { request_id, phi_version, kind: kind as u32, protocol_version: PROTOCOL_VERSION }
+        Self {
+            request_id,
+            phi_version,
+            kind: kind as u32,
+            protocol_version: PROTOCOL_VERSION,
+        }
     }
 
     /// Checks the version and decodes the kind.
@@ -161,7 +182,12 @@ pub struct GraphResponseHeader {
 
 impl GraphResponseHeader {
     /// A header answering `request`, current protocol version.
-    pub fn answering(request: &GraphRequestHeader, status: GraphStatus, graph_version: u64, phi_version: PhiVersion) -> Self {
+    pub fn answering(
+        request: &GraphRequestHeader,
+        status: GraphStatus,
+        graph_version: u64,
+        phi_version: PhiVersion,
+    ) -> Self {
         Self {
             request_id: request.request_id,
             graph_version,
@@ -264,7 +290,9 @@ impl GraphRequest {
                 check_points("from", std::iter::once(from))
             }
             GraphRequest::Routes { queries } => check_route_queries(queries),
-            GraphRequest::LeastVisited { candidates } => check_points("candidates", candidates.iter()),
+            GraphRequest::LeastVisited { candidates } => {
+                check_points("candidates", candidates.iter())
+            }
             GraphRequest::ReportReaching { samples } => check_reach_samples(samples),
             GraphRequest::Stats | GraphRequest::Dump => Ok(()),
         }
@@ -275,23 +303,37 @@ impl GraphRequest {
 fn check_route_queries(queries: &[RouteQuery]) -> Result<(), ProtocolError> {
     check_points("queries.start", queries.iter().map(|q| &q.start))?;
     check_points("queries.end", queries.iter().map(|q| &q.end))?;
-    check_points("queries.fallback_origin", queries.iter().filter_map(|q| q.fallback_origin.as_ref()))
+    check_points(
+        "queries.fallback_origin",
+        queries.iter().filter_map(|q| q.fallback_origin.as_ref()),
+    )
 }
 
 /// Finiteness of reach samples.
 fn check_reach_samples(samples: &[ReachSample]) -> Result<(), ProtocolError> {
     check_points("samples.subgoal", samples.iter().map(|s| &s.subgoal))?;
     match samples.iter().position(|s| !s.error.is_finite()) {
-        Some(index) => Err(ProtocolError::NonFinite { field: "samples.error", index, value: samples[index].error }),
+        Some(index) => Err(ProtocolError::NonFinite {
+            field: "samples.error",
+            index,
+            value: samples[index].error,
+        }),
         None => Ok(()),
     }
 }
 
 /// `Err(NonFinite)` at the first point with a NaN/inf coordinate.
-fn check_points<'a>(field: &'static str, points: impl Iterator<Item = &'a LatentPoint>) -> Result<(), ProtocolError> {
+fn check_points<'a>(
+    field: &'static str,
+    points: impl Iterator<Item = &'a LatentPoint>,
+) -> Result<(), ProtocolError> {
     for (index, point) in points.enumerate() {
         if let Some(value) = point.iter().copied().find(|v| !v.is_finite()) {
-            return Err(ProtocolError::NonFinite { field, index, value });
+            return Err(ProtocolError::NonFinite {
+                field,
+                index,
+                value,
+            });
         }
     }
     Ok(())

@@ -20,7 +20,10 @@ pub fn check_version(found: u32) -> Result<(), ProtocolError> {
     if found == PROTOCOL_VERSION {
         Ok(())
     } else {
-        Err(ProtocolError::VersionMismatch { expected: PROTOCOL_VERSION, found })
+        Err(ProtocolError::VersionMismatch {
+            expected: PROTOCOL_VERSION,
+            found,
+        })
     }
 }
 
@@ -121,7 +124,10 @@ impl TrajectoryFlags {
     pub fn check(self) -> Result<(), ProtocolError> {
         match self.0 & !Self::ALL {
             0 => Ok(()),
-            bits => Err(ProtocolError::UnknownFlags { what: "trajectory flag", bits }),
+            bits => Err(ProtocolError::UnknownFlags {
+                what: "trajectory flag",
+                bits,
+            }),
         }
     }
 }
@@ -166,7 +172,8 @@ impl TrajectoryHeader {
     /// A header for records of `layout`, all other fields zero, current protocol version.
     pub fn for_layout(layout: &StepLayout) -> Result<Self, ProtocolError> {
         let dim = |name: &str, value: usize| {
-            u32::try_from(value).map_err(|_| ProtocolError::InvalidDims(format!("{name} = {value} exceeds u32")))
+            u32::try_from(value)
+                .map_err(|_| ProtocolError::InvalidDims(format!("{name} = {value} exceeds u32")))
         };
         Ok(Self {
             episode_id: EpisodeId(0),
@@ -203,9 +210,15 @@ impl TrajectoryHeader {
         self.flags.check()?;
         let layout = self.step_layout()?;
         if self.n_steps == 0 {
-            return Err(ProtocolError::InvalidDims("a trajectory chunk must hold at least one step".to_owned()));
+            return Err(ProtocolError::InvalidDims(
+                "a trajectory chunk must hold at least one step".to_owned(),
+            ));
         }
-        check_len("trajectory chunk payload", self.n_steps as usize * layout.record_len(), payload_len)?;
+        check_len(
+            "trajectory chunk payload",
+            self.n_steps as usize * layout.record_len(),
+            payload_len,
+        )?;
         Ok(layout)
     }
 }
@@ -238,7 +251,12 @@ pub struct WeightsHeader {
 
 impl WeightsHeader {
     /// A header for `byte_len` bytes of weights, current protocol version.
-    pub fn new(policy_version: PolicyVersion, phi_version: PhiVersion, layout_hash: u64, byte_len: usize) -> Self {
+    pub fn new(
+        policy_version: PolicyVersion,
+        phi_version: PhiVersion,
+        layout_hash: u64,
+        byte_len: usize,
+    ) -> Self {
         Self {
             policy_version,
             phi_version,
@@ -250,10 +268,17 @@ impl WeightsHeader {
     }
 
     /// Checks version, the receiver's `expected_layout_hash` and the payload length.
-    pub fn check(&self, expected_layout_hash: u64, payload_len: usize) -> Result<(), ProtocolError> {
+    pub fn check(
+        &self,
+        expected_layout_hash: u64,
+        payload_len: usize,
+    ) -> Result<(), ProtocolError> {
         self.check_version()?;
         if self.layout_hash != expected_layout_hash {
-            return Err(ProtocolError::LayoutHashMismatch { expected: expected_layout_hash, found: self.layout_hash });
+            return Err(ProtocolError::LayoutHashMismatch {
+                expected: expected_layout_hash,
+                found: self.layout_hash,
+            });
         }
         check_len("weights payload", self.byte_len as usize, payload_len)
     }
@@ -290,7 +315,12 @@ impl TryFrom<u32> for ProcessRole {
             2 => ProcessRole::Actor,
             3 => ProcessRole::Evaluator,
             4 => ProcessRole::GraphService,
-            _ => return Err(ProtocolError::UnknownCode { what: "process role", code }),
+            _ => {
+                return Err(ProtocolError::UnknownCode {
+                    what: "process role",
+                    code,
+                })
+            }
         })
     }
 }
@@ -323,7 +353,14 @@ pub struct MetricsSample {
 
 impl MetricsSample {
     /// A sample; `name` must be 1–48 printable ASCII characters.
-    pub fn new(role: ProcessRole, source_id: u32, name: &str, value: f64, env_step: u64, wall_time_ms: u64) -> Result<Self, ProtocolError> {
+    pub fn new(
+        role: ProcessRole,
+        source_id: u32,
+        name: &str,
+        value: f64,
+        env_step: u64,
+        wall_time_ms: u64,
+    ) -> Result<Self, ProtocolError> {
         validate_metric_name(name.as_bytes())?;
         let mut bytes = [0u8; METRIC_NAME_CAPACITY];
         bytes[..name.len()].copy_from_slice(name.as_bytes());
@@ -341,9 +378,11 @@ impl MetricsSample {
 
     /// The metric name, checked (the bytes came from another process).
     pub fn name(&self) -> Result<&str, ProtocolError> {
-        let bytes = self.name.get(..self.name_len as usize).ok_or_else(|| ProtocolError::InvalidMetricName {
-            name: String::from_utf8_lossy(&self.name).into_owned(),
-            reason: format!("name_len {} exceeds {METRIC_NAME_CAPACITY}", self.name_len),
+        let bytes = self.name.get(..self.name_len as usize).ok_or_else(|| {
+            ProtocolError::InvalidMetricName {
+                name: String::from_utf8_lossy(&self.name).into_owned(),
+                reason: format!("name_len {} exceeds {METRIC_NAME_CAPACITY}", self.name_len),
+            }
         })?;
         validate_metric_name(bytes)?;
         std::str::from_utf8(bytes).map_err(|err| ProtocolError::InvalidMetricName {
@@ -369,7 +408,10 @@ fn validate_metric_name(bytes: &[u8]) -> Result<(), ProtocolError> {
     let reason = if bytes.is_empty() {
         Some("must not be empty".to_owned())
     } else if bytes.len() > METRIC_NAME_CAPACITY {
-        Some(format!("is {} bytes long; at most {METRIC_NAME_CAPACITY} fit", bytes.len()))
+        Some(format!(
+            "is {} bytes long; at most {METRIC_NAME_CAPACITY} fit",
+            bytes.len()
+        ))
     } else if !bytes.iter().all(|b| b.is_ascii_graphic()) {
         Some("must be printable ASCII without spaces, e.g. \"losses/high_critic\"".to_owned())
     } else {
@@ -377,7 +419,10 @@ fn validate_metric_name(bytes: &[u8]) -> Result<(), ProtocolError> {
     };
     match reason {
         None => Ok(()),
-        Some(reason) => Err(ProtocolError::InvalidMetricName { name: String::from_utf8_lossy(bytes).into_owned(), reason }),
+        Some(reason) => Err(ProtocolError::InvalidMetricName {
+            name: String::from_utf8_lossy(bytes).into_owned(),
+            reason,
+        }),
     }
 }
 
@@ -397,7 +442,10 @@ impl TryFrom<u32> for ControlCommand {
         match code {
             1 => Ok(ControlCommand::Stop),
             2 => Ok(ControlCommand::Checkpoint),
-            _ => Err(ProtocolError::UnknownCode { what: "control command", code }),
+            _ => Err(ProtocolError::UnknownCode {
+                what: "control command",
+                code,
+            }),
         }
     }
 }
@@ -418,7 +466,11 @@ pub struct ControlMessage {
 impl ControlMessage {
     /// A message with the current protocol version.
     pub fn new(sequence: u64, command: ControlCommand) -> Self {
-        Self { sequence, command: command as u32, protocol_version: PROTOCOL_VERSION }
+        Self {
+            sequence,
+            command: command as u32,
+            protocol_version: PROTOCOL_VERSION,
+        }
     }
 
     /// Checks the version and decodes the command.

@@ -39,7 +39,9 @@ pub enum RunIdError {
         max: usize,
     },
     /// The id contains a character outside `A-Z a-z 0-9 _ -`.
-    #[error("run id {id:?} contains {found:?} at position {position}; only A-Z a-z 0-9 _ - are allowed")]
+    #[error(
+        "run id {id:?} contains {found:?} at position {position}; only A-Z a-z 0-9 _ - are allowed"
+    )]
     BadChar {
         /// The rejected id.
         id: String,
@@ -66,11 +68,18 @@ impl RunId {
             return Err(RunIdError::Empty);
         }
         if id.len() > MAX_RUN_ID_LEN {
-            return Err(RunIdError::TooLong { len: id.len(), max: MAX_RUN_ID_LEN });
+            return Err(RunIdError::TooLong {
+                len: id.len(),
+                max: MAX_RUN_ID_LEN,
+            });
         }
         let allowed = |ch: char| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-';
         if let Some((position, found)) = id.chars().enumerate().find(|(_, ch)| !allowed(*ch)) {
-            return Err(RunIdError::BadChar { id: id.to_owned(), found, position });
+            return Err(RunIdError::BadChar {
+                id: id.to_owned(),
+                found,
+                position,
+            });
         }
         if !id.starts_with(|ch: char| ch.is_ascii_alphanumeric()) {
             return Err(RunIdError::BadStart(id.to_owned()));
@@ -142,8 +151,13 @@ pub enum Service {
 
 impl Service {
     /// Every service, in a fixed order (useful for cleanup and listings).
-    pub const ALL: [Service; 5] =
-        [Service::Trajectories, Service::Weights, Service::Graph, Service::Metrics, Service::Control];
+    pub const ALL: [Service; 5] = [
+        Service::Trajectories,
+        Service::Weights,
+        Service::Graph,
+        Service::Metrics,
+        Service::Control,
+    ];
 
     /// The last component of the service name.
     pub fn suffix(self) -> &'static str {

@@ -71,7 +71,12 @@ impl TryFrom<u32> for DecisionKind {
             4 => DecisionKind::FrontierRoute,
             5 => DecisionKind::FrontierCount,
             6 => DecisionKind::Evaluation,
-            _ => return Err(ProtocolError::UnknownCode { what: "decision kind", code }),
+            _ => {
+                return Err(ProtocolError::UnknownCode {
+                    what: "decision kind",
+                    code,
+                })
+            }
         })
     }
 }
@@ -182,10 +187,22 @@ pub struct StepLayout {
 
 impl StepLayout {
     /// A layout; every dimension must be at least 1.
-    pub fn new(obs_dim: usize, action_dim: usize, goal_dim: usize, latent_dim: usize) -> Result<Self, ProtocolError> {
-        let layout = StepLayout { obs_dim, action_dim, goal_dim, latent_dim };
+    pub fn new(
+        obs_dim: usize,
+        action_dim: usize,
+        goal_dim: usize,
+        latent_dim: usize,
+    ) -> Result<Self, ProtocolError> {
+        let layout = StepLayout {
+            obs_dim,
+            action_dim,
+            goal_dim,
+            latent_dim,
+        };
         if [obs_dim, action_dim, goal_dim, latent_dim].contains(&0) {
-            return Err(ProtocolError::InvalidDims(format!("every dimension must be >= 1, got {layout:?}")));
+            return Err(ProtocolError::InvalidDims(format!(
+                "every dimension must be >= 1, got {layout:?}"
+            )));
         }
         Ok(layout)
     }
@@ -220,7 +237,9 @@ impl StepLayout {
             }
             start += len;
         }
-        let scalar = ["reward", "decision", "success", "terminated", "truncated"].iter().position(|s| *s == name)?;
+        let scalar = ["reward", "decision", "success", "terminated", "truncated"]
+            .iter()
+            .position(|s| *s == name)?;
         Some(start + scalar..start + scalar + 1)
     }
 
@@ -285,7 +304,8 @@ impl StepLayout {
         }
         let s = &record[self.scalars_start()..];
         check_finite("reward", &s[..1])?;
-        let [obs, next_obs, phi, next_phi, subgoal, high_action, action, goal, achieved_goal] = fields;
+        let [obs, next_obs, phi, next_phi, subgoal, high_action, action, goal, achieved_goal] =
+            fields;
         Ok(StepView {
             obs,
             next_obs,
@@ -310,12 +330,22 @@ impl StepLayout {
     }
 
     /// Borrows every record of a chunk payload of `n_steps` steps.
-    pub fn view_chunk<'a>(&self, payload: &'a [f32], n_steps: usize) -> Result<Vec<StepView<'a>>, ProtocolError> {
+    pub fn view_chunk<'a>(
+        &self,
+        payload: &'a [f32],
+        n_steps: usize,
+    ) -> Result<Vec<StepView<'a>>, ProtocolError> {
         let expected = n_steps.checked_mul(self.record_len()).ok_or_else(|| {
-            ProtocolError::InvalidDims(format!("{n_steps} steps × {} floats overflows", self.record_len()))
+            ProtocolError::InvalidDims(format!(
+                "{n_steps} steps × {} floats overflows",
+                self.record_len()
+            ))
         })?;
         check_len("trajectory chunk payload", expected, payload.len())?;
-        payload.chunks_exact(self.record_len()).map(|record| self.view(record)).collect()
+        payload
+            .chunks_exact(self.record_len())
+            .map(|record| self.view(record))
+            .collect()
     }
 }
 
@@ -324,14 +354,22 @@ pub(crate) fn check_len(what: &str, expected: usize, found: usize) -> Result<(),
     if expected == found {
         Ok(())
     } else {
-        Err(ProtocolError::LengthMismatch { what: what.to_owned(), expected, found })
+        Err(ProtocolError::LengthMismatch {
+            what: what.to_owned(),
+            expected,
+            found,
+        })
     }
 }
 
 /// `Err(NonFinite)` at the first NaN or infinity.
 fn check_finite(field: &'static str, values: &[f32]) -> Result<(), ProtocolError> {
     match values.iter().position(|v| !v.is_finite()) {
-        Some(index) => Err(ProtocolError::NonFinite { field, index, value: values[index] }),
+        Some(index) => Err(ProtocolError::NonFinite {
+            field,
+            index,
+            value: values[index],
+        }),
         None => Ok(()),
     }
 }
@@ -349,9 +387,13 @@ fn decode_flag(field: &'static str, value: f32) -> Result<bool, ProtocolError> {
 
 /// A decision code stored as an integral f32.
 fn decode_decision(value: f32) -> Result<DecisionKind, ProtocolError> {
-    let integral = value.is_finite() && value >= 0.0 && value.fract() == 0.0 && value <= u32::MAX as f32;
+    let integral =
+        value.is_finite() && value >= 0.0 && value.fract() == 0.0 && value <= u32::MAX as f32;
     if !integral {
-        return Err(ProtocolError::InvalidFlag { field: "decision", value });
+        return Err(ProtocolError::InvalidFlag {
+            field: "decision",
+            value,
+        });
     }
     DecisionKind::try_from(value as u32)
 }

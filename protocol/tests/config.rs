@@ -27,7 +27,9 @@ fn sets(args: &[&str]) -> Vec<String> {
 
 #[test]
 fn defaults_validate() {
-    Config::default().validate().expect("defaults must validate");
+    Config::default()
+        .validate()
+        .expect("defaults must validate");
     let loaded = Config::load(None, &[]).expect("no file, no overrides");
     assert_eq!(loaded, Config::default());
 }
@@ -52,12 +54,22 @@ x = 1
 "#,
     );
     let errors = invalid(Config::load(Some(&path), &sets(&["graph.cell_size=-2"])));
-    for path in ["run.nmae", "learner.high.batch_size", "learner.high.gamma", "learner.low.algo", "bogus", "graph.cell_size"] {
+    for path in [
+        "run.nmae",
+        "learner.high.batch_size",
+        "learner.high.gamma",
+        "learner.low.algo",
+        "bogus",
+        "graph.cell_size",
+    ] {
         assert!(errors.has_path(path), "missing issue for {path}:\n{errors}");
     }
     assert_eq!(errors.issues.len(), 6, "{errors}");
     let text = errors.to_string();
-    assert!(text.contains("learner.high.gamma = 1.5: must be in (0, 1)"), "{text}");
+    assert!(
+        text.contains("learner.high.gamma = 1.5: must be in (0, 1)"),
+        "{text}"
+    );
     assert!(text.contains("unknown key"), "{text}");
     assert!(text.contains("invalid type"), "{text}");
 }
@@ -68,7 +80,10 @@ fn validate_lists_every_problem_with_its_value() {
     config.learner.high.gamma = 1.5;
     config.learner.low.tau = 0.0;
     config.asi.fr_k_range = [5, 3];
-    config.asi.fr_prob_schedule = vec![FrProbStep { from_episode: 10, p: 1.5 }];
+    config.asi.fr_prob_schedule = vec![FrProbStep {
+        from_episode: 10,
+        p: 1.5,
+    }];
     config.run.n_actors = 100;
     let errors = config.validate().expect_err("invalid on purpose");
     for path in [
@@ -89,12 +104,22 @@ fn set_overrides_beat_the_file_which_beats_defaults() {
         "precedence.toml",
         "[learner.high]\ngamma = 0.95\nlr = 1e-3\n[hierarchy]\nc = 10\n",
     );
-    let config = Config::load(Some(&path), &sets(&["learner.high.gamma=0.9", "env.task=antmaze-s"])).expect("valid");
+    let config = Config::load(
+        Some(&path),
+        &sets(&["learner.high.gamma=0.9", "env.task=antmaze-s"]),
+    )
+    .expect("valid");
     assert_eq!(config.learner.high.gamma, 0.9, "--set wins over the file");
     assert_eq!(config.learner.high.lr, 1e-3, "the file wins over defaults");
     assert_eq!(config.hierarchy.c, 10);
-    assert_eq!(config.learner.high.tau, 0.005, "untouched fields keep defaults");
-    assert_eq!(config.env.task, "antmaze-s", "bare strings are accepted in --set");
+    assert_eq!(
+        config.learner.high.tau, 0.005,
+        "untouched fields keep defaults"
+    );
+    assert_eq!(
+        config.env.task, "antmaze-s",
+        "bare strings are accepted in --set"
+    );
 }
 
 #[test]
@@ -113,7 +138,13 @@ fn later_overrides_win_and_accept_toml_values() {
     )
     .expect("valid");
     assert_eq!(config.learner.high.hidden, vec![64, 64, 64]);
-    assert_eq!(config.asi.fr_prob_schedule, vec![FrProbStep { from_episode: 0, p: 0.1 }]);
+    assert_eq!(
+        config.asi.fr_prob_schedule,
+        vec![FrProbStep {
+            from_episode: 0,
+            p: 0.1
+        }]
+    );
     assert_eq!(config.graph.node_position, NodePosition::Centre);
     assert_eq!(config.learner.low.algo, LowAlgo::Deterministic);
     assert_eq!(config.env.episode_length, Some(200));
@@ -143,7 +174,10 @@ fn malformed_overrides_are_refused_with_the_argument() {
 
 #[test]
 fn wrong_type_in_override_names_the_path() {
-    let errors = invalid(Config::load(None, &sets(&["learner.high.gamma=0.9x", "eval.n_episodes=-1"])));
+    let errors = invalid(Config::load(
+        None,
+        &sets(&["learner.high.gamma=0.9x", "eval.n_episodes=-1"]),
+    ));
     assert!(errors.has_path("learner.high.gamma"), "{errors}");
     assert!(errors.has_path("eval.n_episodes"), "{errors}");
     let errors = invalid(Config::load(None, &sets(&["learner.high=3"])));
@@ -178,8 +212,14 @@ fn resolved_toml_round_trips_to_an_equal_config() {
 
     let defaults = Config::default();
     let text = defaults.to_resolved_toml().expect("serializable");
-    assert!(!text.contains("episode_length"), "absent options are omitted:\n{text}");
-    assert_eq!(Config::from_toml_str(&text, "resolved").expect("loads"), defaults);
+    assert!(
+        !text.contains("episode_length"),
+        "absent options are omitted:\n{text}"
+    );
+    assert_eq!(
+        Config::from_toml_str(&text, "resolved").expect("loads"),
+        defaults
+    );
 }
 
 #[test]
@@ -189,7 +229,16 @@ fn derived_values_follow_the_spec() {
     assert_eq!(config.learner.low.updates_per_env_step_for(1000), 0.2);
     assert_eq!(config.encoder.negative_offset_or(config.hierarchy.c), 20);
     let fr = &config.asi;
-    assert_eq!([fr.fr_prob(0), fr.fr_prob(499), fr.fr_prob(500), fr.fr_prob(700), fr.fr_prob(10_000)], [0.2, 0.2, 0.3, 0.4, 0.4]);
+    assert_eq!(
+        [
+            fr.fr_prob(0),
+            fr.fr_prob(499),
+            fr.fr_prob(500),
+            fr.fr_prob(700),
+            fr.fr_prob(10_000)
+        ],
+        [0.2, 0.2, 0.3, 0.4, 0.4]
+    );
     assert_eq!(config.run.run_dir(), PathBuf::from("runs/antmaze-u"));
 }
 
@@ -200,9 +249,19 @@ fn every_shipped_config_loads_and_validates() {
     for entry in std::fs::read_dir(&dir).expect("configs/ exists") {
         let path = entry.expect("dir entry").path();
         if path.extension().is_some_and(|ext| ext == "toml") {
-            let config = Config::load(Some(&path), &[]).unwrap_or_else(|err| panic!("{}: {err}", path.display()));
-            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_owned();
-            assert_eq!(config.run.name, stem, "{}: run.name should match the file name", path.display());
+            let config = Config::load(Some(&path), &[])
+                .unwrap_or_else(|err| panic!("{}: {err}", path.display()));
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or_default()
+                .to_owned();
+            assert_eq!(
+                config.run.name,
+                stem,
+                "{}: run.name should match the file name",
+                path.display()
+            );
             names.push(stem);
         }
     }
@@ -218,7 +277,10 @@ fn every_shipped_config_loads_and_validates() {
         "smoke",
     ];
     for name in expected {
-        assert!(names.iter().any(|n| n == name), "configs/{name}.toml missing; found {names:?}");
+        assert!(
+            names.iter().any(|n| n == name),
+            "configs/{name}.toml missing; found {names:?}"
+        );
     }
 }
 

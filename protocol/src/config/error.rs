@@ -40,7 +40,11 @@ impl ConfigErrors {
 impl fmt::Display for ConfigErrors {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let n = self.issues.len();
-        write!(f, "invalid configuration ({n} problem{}):", if n == 1 { "" } else { "s" })?;
+        write!(
+            f,
+            "invalid configuration ({n} problem{}):",
+            if n == 1 { "" } else { "s" }
+        )?;
         for issue in &self.issues {
             write!(f, "\n  - {issue}")?;
         }
@@ -156,14 +160,22 @@ impl Checker {
     /// Requires a non-empty list of layer widths, each at least 1.
     pub fn layer_sizes(&mut self, path: &str, sizes: &[usize]) {
         if sizes.is_empty() || sizes.contains(&0) {
-            self.issue(path, format!("{sizes:?}"), "must list at least one layer, each of width >= 1, e.g. [256, 256]");
+            self.issue(
+                path,
+                format!("{sizes:?}"),
+                "must list at least one layer, each of width >= 1, e.g. [256, 256]",
+            );
         }
     }
 
     /// Requires an inclusive integer range `[lo, hi]` with `1 <= lo <= hi`.
     pub fn int_range(&mut self, path: &str, range: [u32; 2]) {
         if range[0] == 0 || range[0] > range[1] {
-            self.issue(path, format!("{range:?}"), "must be [lo, hi] with 1 <= lo <= hi");
+            self.issue(
+                path,
+                format!("{range:?}"),
+                "must be [lo, hi] with 1 <= lo <= hi",
+            );
         }
     }
 
@@ -172,7 +184,9 @@ impl Checker {
         if self.issues.is_empty() {
             Ok(())
         } else {
-            Err(ConfigErrors { issues: self.issues })
+            Err(ConfigErrors {
+                issues: self.issues,
+            })
         }
     }
 

@@ -85,7 +85,10 @@ impl RunConfig {
             c.at_least_one("run.max_env_steps", steps);
         }
         c.positive("run.metrics_interval_secs", self.metrics_interval_secs);
-        c.positive("run.checkpoint_interval_mins", self.checkpoint_interval_mins);
+        c.positive(
+            "run.checkpoint_interval_mins",
+            self.checkpoint_interval_mins,
+        );
     }
 }
 
@@ -105,7 +108,10 @@ pub struct EnvConfig {
 
 impl Default for EnvConfig {
     fn default() -> Self {
-        Self { task: "antmaze-u".to_owned(), episode_length: None }
+        Self {
+            task: "antmaze-u".to_owned(),
+            episode_length: None,
+        }
     }
 }
 
@@ -119,7 +125,9 @@ impl EnvConfig {
                 c.issue(
                     "env.episode_length",
                     len,
-                    format!("must be at least hierarchy.c = {subgoal_interval} (one high-level step)"),
+                    format!(
+                        "must be at least hierarchy.c = {subgoal_interval} (one high-level step)"
+                    ),
                 );
             }
         }
@@ -146,7 +154,12 @@ pub struct HierarchyConfig {
 
 impl Default for HierarchyConfig {
     fn default() -> Self {
-        Self { c: 20, abs_range: 10.0, low_reward_scale: 0.1, low_reach_threshold: 0.1 }
+        Self {
+            c: 20,
+            abs_range: 10.0,
+            low_reward_scale: 0.1,
+            low_reach_threshold: 0.1,
+        }
     }
 }
 
@@ -175,7 +188,10 @@ pub struct ReplayConfig {
 
 impl Default for ReplayConfig {
     fn default() -> Self {
-        Self { capacity_steps: 8_000_000, replay_slack_steps: 20_000 }
+        Self {
+            capacity_steps: 8_000_000,
+            replay_slack_steps: 20_000,
+        }
     }
 }
 
@@ -206,7 +222,10 @@ pub struct EvalConfig {
 
 impl Default for EvalConfig {
     fn default() -> Self {
-        Self { interval_episodes: 50, n_episodes: 10 }
+        Self {
+            interval_episodes: 50,
+            n_episodes: 10,
+        }
     }
 }
 
@@ -257,12 +276,24 @@ impl TransportConfig {
             c.issue(
                 "transport.max_actors",
                 self.max_actors,
-                format!("must be at least run.n_actors + 1 = {} (the evaluator is an actor too)", n_actors.saturating_add(1)),
+                format!(
+                    "must be at least run.n_actors + 1 = {} (the evaluator is an actor too)",
+                    n_actors.saturating_add(1)
+                ),
             );
         }
         c.at_least_one("transport.chunk_steps", u64::from(self.chunk_steps));
-        c.at_least_one("transport.weights_check_interval_steps", u64::from(self.weights_check_interval_steps));
-        c.at_least_one("transport.backpressure_timeout_ms", self.backpressure_timeout_ms);
-        c.at_least_one("transport.graph_request_timeout_ms", self.graph_request_timeout_ms);
+        c.at_least_one(
+            "transport.weights_check_interval_steps",
+            u64::from(self.weights_check_interval_steps),
+        );
+        c.at_least_one(
+            "transport.backpressure_timeout_ms",
+            self.backpressure_timeout_ms,
+        );
+        c.at_least_one(
+            "transport.graph_request_timeout_ms",
+            self.graph_request_timeout_ms,
+        );
     }
 }

@@ -72,14 +72,28 @@ impl Default for HighLearnerConfig {
 
 impl HighLearnerConfig {
     fn check(&self, c: &mut Checker) {
-        check_sac_common(c, "learner.high", self.gamma, self.tau, self.lr, self.batch_size, self.alpha);
+        check_sac_common(
+            c,
+            "learner.high",
+            self.gamma,
+            self.tau,
+            self.lr,
+            self.batch_size,
+            self.alpha,
+        );
         c.layer_sizes("learner.high.hidden", &self.hidden);
-        c.positive("learner.high.updates_per_transition", self.updates_per_transition);
+        c.positive(
+            "learner.high.updates_per_transition",
+            self.updates_per_transition,
+        );
         if self.min_transitions < self.batch_size as u64 {
             c.issue(
                 "learner.high.min_transitions",
                 self.min_transitions,
-                format!("must be at least learner.high.batch_size = {}", self.batch_size),
+                format!(
+                    "must be at least learner.high.batch_size = {}",
+                    self.batch_size
+                ),
             );
         }
     }
@@ -150,14 +164,26 @@ impl LowLearnerConfig {
     /// Low-level updates per env step for an episode of `episode_length` steps: the explicit
     /// value if set, else `updates_per_episode / episode_length`.
     pub fn updates_per_env_step_for(&self, episode_length: u32) -> f64 {
-        self.updates_per_env_step
-            .unwrap_or_else(|| f64::from(self.updates_per_episode) / f64::from(episode_length.max(1)))
+        self.updates_per_env_step.unwrap_or_else(|| {
+            f64::from(self.updates_per_episode) / f64::from(episode_length.max(1))
+        })
     }
 
     fn check(&self, c: &mut Checker) {
-        check_sac_common(c, "learner.low", self.gamma, self.tau, self.lr, self.batch_size, self.alpha);
+        check_sac_common(
+            c,
+            "learner.low",
+            self.gamma,
+            self.tau,
+            self.lr,
+            self.batch_size,
+            self.alpha,
+        );
         c.layer_sizes("learner.low.hidden", &self.hidden);
-        c.at_least_one("learner.low.updates_per_episode", u64::from(self.updates_per_episode));
+        c.at_least_one(
+            "learner.low.updates_per_episode",
+            u64::from(self.updates_per_episode),
+        );
         if let Some(ratio) = self.updates_per_env_step {
             c.positive("learner.low.updates_per_env_step", ratio);
         }
@@ -222,17 +248,31 @@ impl DeterministicLowConfig {
         c.positive(&format!("{p}.lr"), self.lr);
         c.at_least_one(&format!("{p}.lr_decay_episodes"), self.lr_decay_episodes);
         c.fraction(&format!("{p}.lr_decay_factor"), self.lr_decay_factor);
-        c.non_negative(&format!("{p}.critic_weight_decay"), self.critic_weight_decay);
+        c.non_negative(
+            &format!("{p}.critic_weight_decay"),
+            self.critic_weight_decay,
+        );
         c.non_negative(&format!("{p}.noise_scale"), self.noise_scale);
         c.closed_interval(&format!("{p}.random_eps"), self.random_eps, 0.0, 1.0);
         c.closed_interval(&format!("{p}.polyak"), self.polyak, 0.0, 1.0);
-        c.at_least_one(&format!("{p}.target_update_period"), u64::from(self.target_update_period));
+        c.at_least_one(
+            &format!("{p}.target_update_period"),
+            u64::from(self.target_update_period),
+        );
         c.positive(&format!("{p}.grad_clip"), self.grad_clip);
     }
 }
 
 /// Checks the fields SAC shares at both levels under `prefix`.
-fn check_sac_common(c: &mut Checker, prefix: &str, gamma: f64, tau: f64, lr: f64, batch: usize, alpha: f64) {
+fn check_sac_common(
+    c: &mut Checker,
+    prefix: &str,
+    gamma: f64,
+    tau: f64,
+    lr: f64,
+    batch: usize,
+    alpha: f64,
+) {
     c.open_interval(&format!("{prefix}.gamma"), gamma, 0.0, 1.0);
     c.fraction(&format!("{prefix}.tau"), tau);
     c.positive(&format!("{prefix}.lr"), lr);

@@ -24,20 +24,31 @@ pub(crate) fn parse_table(text: &str, origin: &str) -> Result<Table, ConfigError
 /// (`0.5`, `true`, `[256, 256]`, `"text"`); if it is not valid TOML it is taken as a bare string,
 /// so `--set env.task=antmaze-s` works without quotes.
 pub(crate) fn apply_override(table: &mut Table, arg: &str) -> Result<(), ConfigError> {
-    let bad = |reason: &str| ConfigError::Override { arg: arg.to_owned(), reason: reason.to_owned() };
+    let bad = |reason: &str| ConfigError::Override {
+        arg: arg.to_owned(),
+        reason: reason.to_owned(),
+    };
     let (key, raw) = arg.split_once('=').ok_or_else(|| bad("missing `=`"))?;
     let segments: Vec<&str> = key.trim().split('.').collect();
-    let valid_segment = |s: &&str| !s.is_empty() && s.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_');
+    let valid_segment =
+        |s: &&str| !s.is_empty() && s.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_');
     if !segments.iter().all(valid_segment) {
-        return Err(bad("the key must be dot-separated names of letters, digits and `_`"));
+        return Err(bad(
+            "the key must be dot-separated names of letters, digits and `_`",
+        ));
     }
     let value = parse_override_value(raw.trim());
     let (last, parents) = segments.split_last().ok_or_else(|| bad("empty key"))?;
     let mut node = table;
     for (depth, segment) in parents.iter().enumerate() {
-        let entry = node.entry((*segment).to_owned()).or_insert_with(|| Value::Table(Table::new()));
+        let entry = node
+            .entry((*segment).to_owned())
+            .or_insert_with(|| Value::Table(Table::new()));
         node = entry.as_table_mut().ok_or_else(|| {
-            bad(&format!("`{}` is a value, not a section", segments[..=depth].join(".")))
+            bad(&format!(
+                "`{}` is a value, not a section",
+                segments[..=depth].join(".")
+            ))
         })?;
     }
     node.insert((*last).to_owned(), value);
@@ -46,7 +57,10 @@ pub(crate) fn apply_override(table: &mut Table, arg: &str) -> Result<(), ConfigE
 
 /// A TOML value from override text, or the text itself as a string.
 fn parse_override_value(raw: &str) -> Value {
-    let parsed = format!("v = {raw}").parse::<Table>().ok().and_then(|mut t| t.remove("v"));
+    let parsed = format!("v = {raw}")
+        .parse::<Table>()
+        .ok()
+        .and_then(|mut t| t.remove("v"));
     parsed.unwrap_or_else(|| Value::String(raw.to_owned()))
 }
 
@@ -64,7 +78,9 @@ pub(crate) fn table_to_config(mut table: Table) -> Result<Config, ConfigError> {
             value: "(whole file)".to_owned(),
             message: err.message().trim().to_owned(),
         };
-        ConfigError::Invalid(super::ConfigErrors { issues: vec![issue] })
+        ConfigError::Invalid(super::ConfigErrors {
+            issues: vec![issue],
+        })
     })?;
     let mut issues = checker.into_issues();
     if let Err(errors) = config.validate() {
@@ -78,7 +94,12 @@ pub(crate) fn table_to_config(mut table: Table) -> Result<Config, ConfigError> {
 }
 
 /// Walks `table` (found at `prefix`), probing each key; records failing paths in `bad`.
-fn probe_table(table: &Table, prefix: &mut Vec<String>, checker: &mut Checker, bad: &mut Vec<Vec<String>>) {
+fn probe_table(
+    table: &Table,
+    prefix: &mut Vec<String>,
+    checker: &mut Checker,
+    bad: &mut Vec<Vec<String>>,
+) {
     for (key, value) in table {
         prefix.push(key.clone());
         let probe_value = match value {
@@ -87,7 +108,11 @@ fn probe_table(table: &Table, prefix: &mut Vec<String>, checker: &mut Checker, b
         };
         match probe(prefix, probe_value) {
             Err(message) => {
-                let shown = if value.is_table() { "{…}".to_owned() } else { value.to_string() };
+                let shown = if value.is_table() {
+                    "{…}".to_owned()
+                } else {
+                    value.to_string()
+                };
                 checker.issue(&prefix.join("."), shown, message);
                 bad.push(prefix.clone());
             }
@@ -122,7 +147,10 @@ fn probe(path: &[String], value: Value) -> Result<(), String> {
 fn describe_serde_error(message: &str) -> String {
     let message = message.trim();
     if message.starts_with("unknown field") {
-        format!("unknown key: {}", message.trim_start_matches("unknown field").trim())
+        format!(
+            "unknown key: {}",
+            message.trim_start_matches("unknown field").trim()
+        )
     } else {
         message.to_owned()
     }
@@ -130,7 +158,9 @@ fn describe_serde_error(message: &str) -> String {
 
 /// Removes the value at `path` from `table` (no-op if absent).
 fn remove_path(table: &mut Table, path: &[String]) {
-    let Some((last, parents)) = path.split_last() else { return };
+    let Some((last, parents)) = path.split_last() else {
+        return;
+    };
     let mut node = table;
     for key in parents {
         match node.get_mut(key).and_then(Value::as_table_mut) {

@@ -93,7 +93,11 @@ impl EncoderConfig {
     pub(crate) fn check(&self, c: &mut Checker) {
         c.layer_sizes("encoder.hidden", &self.hidden);
         if self.out_dim != 2 {
-            c.issue("encoder.out_dim", self.out_dim, "must be 2: the latent graph grid and the high-level action are 2-D");
+            c.issue(
+                "encoder.out_dim",
+                self.out_dim,
+                "must be 2: the latent graph grid and the high-level action are 2-D",
+            );
         }
         c.positive("encoder.lr", self.lr);
         c.at_least_one("encoder.batch_size", self.batch_size as u64);
@@ -108,7 +112,11 @@ impl EncoderConfig {
         c.non_negative("encoder.stable_coeff_late", self.stable_coeff_late);
         c.fraction("encoder.anchor_high_ratio", self.anchor_high_ratio);
         if !(0.0..1.0).contains(&self.regularization_low_ratio) {
-            c.issue("encoder.regularization_low_ratio", self.regularization_low_ratio, "must be in [0, 1)");
+            c.issue(
+                "encoder.regularization_low_ratio",
+                self.regularization_low_ratio,
+                "must be in [0, 1)",
+            );
         }
     }
 }
@@ -195,10 +203,24 @@ impl ExplorationConfig {
         c.positive("exploration.candidate_radius", self.candidate_radius);
         c.non_negative("exploration.push_distance", self.push_distance);
         c.non_negative("exploration.potential_coeff", self.potential_coeff);
-        c.at_least_one("exploration.future_count_interval_episodes", self.future_count_interval_episodes);
-        c.closed_interval("exploration.future_count_discount", self.future_count_discount, 0.0, 1.0);
-        c.at_least_one("exploration.count_prob_interval_episodes", self.count_prob_interval_episodes);
-        c.positive("exploration.count_prob_success_unit", self.count_prob_success_unit);
+        c.at_least_one(
+            "exploration.future_count_interval_episodes",
+            self.future_count_interval_episodes,
+        );
+        c.closed_interval(
+            "exploration.future_count_discount",
+            self.future_count_discount,
+            0.0,
+            1.0,
+        );
+        c.at_least_one(
+            "exploration.count_prob_interval_episodes",
+            self.count_prob_interval_episodes,
+        );
+        c.positive(
+            "exploration.count_prob_success_unit",
+            self.count_prob_success_unit,
+        );
         c.fraction("exploration.far_goal_fraction", self.far_goal_fraction);
     }
 }
@@ -249,7 +271,11 @@ impl GraphConfig {
     pub(crate) fn check(&self, c: &mut Checker) {
         c.positive("graph.cell_size", self.cell_size);
         if self.max_nodes < 2 || self.max_nodes > u32::MAX as usize {
-            c.issue("graph.max_nodes", self.max_nodes, "must be in [2, 4294967295]");
+            c.issue(
+                "graph.max_nodes",
+                self.max_nodes,
+                "must be in [2, 4294967295]",
+            );
         }
         c.at_least_one("graph.edge_window", u64::from(self.edge_window));
         c.at_least_one("graph.max_stored_steps", self.max_stored_steps);
@@ -335,9 +361,18 @@ impl Default for AsiConfig {
             self_imitation: true,
             fr_start_episode: 200,
             fr_prob_schedule: vec![
-                FrProbStep { from_episode: 0, p: 0.2 },
-                FrProbStep { from_episode: 500, p: 0.3 },
-                FrProbStep { from_episode: 700, p: 0.4 },
+                FrProbStep {
+                    from_episode: 0,
+                    p: 0.2,
+                },
+                FrProbStep {
+                    from_episode: 500,
+                    p: 0.3,
+                },
+                FrProbStep {
+                    from_episode: 700,
+                    p: 0.4,
+                },
             ],
             frontier_fraction: 0.9,
             fr_k_range: [3, 6],
@@ -373,24 +408,42 @@ impl AsiConfig {
         c.int_range("asi.fr_k_range", self.fr_k_range);
         c.positive("asi.frontier_epsilon", self.frontier_epsilon);
         c.non_negative("asi.stuck_threshold", self.stuck_threshold);
-        c.at_least_one("asi.count_mode_candidates", self.count_mode_candidates as u64);
+        c.at_least_one(
+            "asi.count_mode_candidates",
+            self.count_mode_candidates as u64,
+        );
         c.non_negative("asi.si_alpha", self.si_alpha);
         c.non_negative("asi.si_beta", self.si_beta);
         c.at_least_one("asi.si_batch_size", self.si_batch_size as u64);
         c.int_range("asi.si_k_range", self.si_k_range);
         c.at_least_one("asi.si_n_refs", u64::from(self.si_n_refs));
         if self.si_buffer_capacity < self.si_batch_size as u64 {
-            c.issue("asi.si_buffer_capacity", self.si_buffer_capacity, "must be at least asi.si_batch_size");
+            c.issue(
+                "asi.si_buffer_capacity",
+                self.si_buffer_capacity,
+                "must be at least asi.si_batch_size",
+            );
         }
     }
 
     fn check_schedule(&self, c: &mut Checker) {
         let path = "asi.fr_prob_schedule";
-        let shown = || format!("{:?}", self.fr_prob_schedule.iter().map(|s| (s.from_episode, s.p)).collect::<Vec<_>>());
+        let shown = || {
+            format!(
+                "{:?}",
+                self.fr_prob_schedule
+                    .iter()
+                    .map(|s| (s.from_episode, s.p))
+                    .collect::<Vec<_>>()
+            )
+        };
         if self.fr_prob_schedule.first().map(|s| s.from_episode) != Some(0) {
             c.issue(path, shown(), "must be non-empty and start with from_episode = 0, e.g. [{ from_episode = 0, p = 0.2 }]");
         }
-        let increasing = self.fr_prob_schedule.windows(2).all(|w| w[0].from_episode < w[1].from_episode);
+        let increasing = self
+            .fr_prob_schedule
+            .windows(2)
+            .all(|w| w[0].from_episode < w[1].from_episode);
         if !increasing {
             c.issue(path, shown(), "from_episode must be strictly increasing");
         }

@@ -22,12 +22,15 @@ use serde::{Deserialize, Serialize};
 
 pub use error::{Checker, ConfigError, ConfigErrors, ConfigIssue};
 pub use general::{
-    EnvConfig, EvalConfig, HierarchyConfig, ReplayConfig, RunConfig, TransportConfig, MAX_DEFAULT_ACTORS,
+    EnvConfig, EvalConfig, HierarchyConfig, ReplayConfig, RunConfig, TransportConfig,
+    MAX_DEFAULT_ACTORS,
 };
-pub use learner::{DeterministicLowConfig, HighLearnerConfig, LearnerConfig, LowAlgo, LowLearnerConfig};
+pub use learner::{
+    DeterministicLowConfig, HighLearnerConfig, LearnerConfig, LowAlgo, LowLearnerConfig,
+};
 pub use method::{
-    AsiConfig, CountModeScore, EncoderConfig, ExplorationConfig, FrProbStep, FutureCountAveraging, GraphConfig,
-    NodePosition, StableWeighting,
+    AsiConfig, CountModeScore, EncoderConfig, ExplorationConfig, FrProbStep, FutureCountAveraging,
+    GraphConfig, NodePosition, StableWeighting,
 };
 
 /// File name of the resolved configuration inside the run directory.
@@ -67,8 +70,10 @@ impl Config {
     pub fn load(file: Option<&Path>, overrides: &[String]) -> Result<Config, ConfigError> {
         let mut table = match file {
             Some(path) => {
-                let text = std::fs::read_to_string(path)
-                    .map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
+                let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+                    path: path.to_owned(),
+                    source,
+                })?;
                 load::parse_table(&text, &path.display().to_string())?
             }
             None => toml::Table::new(),
