@@ -7,6 +7,7 @@
 
 pub mod ant;
 pub mod api;
+pub mod bench;
 pub mod cheetah;
 pub mod coverage;
 pub mod maze;
