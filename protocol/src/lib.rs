@@ -7,6 +7,7 @@
 //!   [`check_version`].
 //! - [`step`]: the f32 record of one env step inside a trajectory chunk ([`StepLayout`]).
 //! - [`graph`]: graph-service requests and responses (postcard bodies, fixed headers).
+//! - [`transport`]: iceoryx2 slice channels with wake-up events (publisher, subscriber).
 //!
 //! Invariants: every header or message carries [`PROTOCOL_VERSION`] and receivers refuse
 //! another version with an error naming both; decoding never panics on malformed input.
@@ -18,13 +19,14 @@ pub mod graph;
 pub mod payload;
 pub mod services;
 pub mod step;
+pub mod transport;
 
 pub use config::{Config, ConfigError, ConfigErrors, ConfigIssue};
 pub use error::ProtocolError;
 pub use graph::{decode, encode, GraphRequest, GraphResponse, LatentPoint};
 pub use payload::{
-    check_version, ActorId, ControlCommand, ControlMessage, EpisodeId, MetricsSample, PhiVersion, PolicyVersion,
-    ProcessRole, TrajectoryFlags, TrajectoryHeader, Versioned, WeightsHeader,
+    check_version, ActorId, ControlCommand, ControlMessage, EpisodeId, MetricsSample, PhiVersion,
+    PolicyVersion, ProcessRole, TrajectoryFlags, TrajectoryHeader, Versioned, WeightsHeader,
 };
 pub use services::{RunId, RunIdError, Service};
 pub use step::{DecisionKind, StepLayout, StepRecord, StepView};
@@ -54,6 +56,12 @@ pub fn layout_hash<'a>(names_and_shapes: impl IntoIterator<Item = (&'a str, &'a 
         .collect();
     entries.sort_unstable();
     entries.iter().fold(FNV_OFFSET, |hash, entry| {
-        entry.bytes().chain(std::iter::once(b'\n')).fold(hash, |h, byte| (h ^ u64::from(byte)).wrapping_mul(FNV_PRIME))
+        let bytes = entry.bytes().chain(std::iter::once(b'\n'));
+        bytes.fold(hash, fnv1a_step)
     })
+}
+
+/// One FNV-1a step: xor the byte in, multiply by the prime.
+fn fnv1a_step(hash: u64, byte: u8) -> u64 {
+    (hash ^ u64::from(byte)).wrapping_mul(FNV_PRIME)
 }
