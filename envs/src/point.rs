@@ -54,7 +54,7 @@ pub struct PointParams {
     /// push reaches 4.24 m/s without the cap). Source: ours.
     pub max_speed_m_per_s: f32,
     /// Simulated seconds per control step. Default 0.2 (as the Ant). Source: ours.
-    pub control_dt_secs: f32,
+    pub control_dt_secs: f64,
     /// Integration sub-steps per control step. Default 10 (0.02 s each, as the Ant's timestep).
     /// Source: ours.
     pub n_substeps: u32,
@@ -81,7 +81,7 @@ impl Default for PointParams {
 impl PointParams {
     /// Seconds per integration sub-step.
     pub fn substep_secs(&self) -> f32 {
-        self.control_dt_secs / self.n_substeps.max(1) as f32
+        (self.control_dt_secs / f64::from(self.n_substeps.max(1))) as f32
     }
 
     /// Checks every field; lists the first problem found.
@@ -91,7 +91,7 @@ impl PointParams {
             ("mass_kg", self.mass_kg),
             ("max_force_n", self.max_force_n),
             ("max_speed_m_per_s", self.max_speed_m_per_s),
-            ("control_dt_secs", self.control_dt_secs),
+            ("control_dt_secs", self.control_dt_secs as f32),
         ];
         for (field, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -272,7 +272,7 @@ impl Robot for PointMass {
     }
 
     fn control_dt_secs(&self) -> f64 {
-        f64::from(self.params.control_dt_secs)
+        self.params.control_dt_secs
     }
 
     fn reset(&mut self, rng: &mut rand_pcg::Pcg64Mcg) {

@@ -4,10 +4,10 @@ use envs::coverage::{Coverage, COVERAGE_CELL_M};
 use envs::maze::{Maze, MazeLayout};
 
 /// U maze, goal box [−2, 10]²: 20 × 20 cells of 0.6 m. Along an axis the cell centres
-/// −1.7, −1.1, …, 9.5 fall 7 into [−2, 2], 7 into (2, 6] and 6 into (6, 10]. Free maze cells
-/// (row band × column band): (1,1) 7·7, (1,2) 7·7, (1,3) 7·6, (2,3) 7·6, (3,1) 6·7, (3,2) 6·7,
-/// (3,3) 6·6 = 49 + 49 + 42 + 42 + 42 + 42 + 36 = 302.
-const U_FREE_COVERAGE_CELLS: usize = 302;
+/// −1.7, −1.1, …, 9.7 fall 7 into [−2, 2] (−1.7 … 1.9), 6 into (2, 6] (2.5 … 5.5) and 7 into
+/// (6, 10] (6.1 … 9.7). Free maze cells (row band × column band): (1,1) 7·7, (1,2) 7·6,
+/// (1,3) 7·7, (2,3) 6·7, (3,1) 7·7, (3,2) 7·6, (3,3) 7·7 = 4·49 + 3·42 = 322.
+const U_FREE_COVERAGE_CELLS: usize = 322;
 
 #[test]
 fn the_u_grid_has_hand_counted_free_cells() {

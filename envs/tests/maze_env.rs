@@ -90,6 +90,7 @@ fn robots_without_a_torso_never_pay_the_fall_penalty() {
     let robot = Teleport { pose: [0.0; 3], has_torso: false };
     let mut env = MazeEnv::new("t", Maze::new(MazeLayout::U), robot, Variant::Train, MazeTaskParams::default()).expect("valid");
     env.reset(1);
+    env.set_goal([0.0, 8.0]).expect("free cell");
     let step = env.step(&[8.0, 0.0, -5.0]).expect("valid action");
     assert_eq!((step.reward, step.info.fell), (-1.0, false));
 }
