@@ -132,7 +132,9 @@ pub struct CheetahParams {
     /// fast limb from sinking into the hurdle within one timestep. Default 0.1 (ours: about
     /// 10 m/s × one 0.01 s timestep; rapier's own default is 0.02).
     pub contact_prediction_m: f32,
-    /// Rapier solver settings (substeps, contact and limit softness); shared with the Ant.
+    /// Rapier solver settings (substeps, contact and limit softness, contact skin); shared with
+    /// the Ant. Default: the shared defaults except `contact_skin_m` = 0, since gym's
+    /// half_cheetah.xml sets no geom margin (the Ant's 0.01 comes from its own XML).
     pub solver: SolverParams,
     /// The hurdle. Default centre (2, 0, 0.175), half-extents (0.2, 1, 0.175): x ∈ [1.8, 2.2],
     /// 0.35 m tall (ASI `halfcheetahhurdle.xml`).
@@ -203,7 +205,10 @@ impl Default for CheetahParams {
             armature_kg_m2: 0.1,
             friction: 0.4,
             contact_prediction_m: 0.1,
-            solver: SolverParams::default(),
+            solver: SolverParams {
+                contact_skin_m: 0.0,
+                ..SolverParams::default()
+            },
             hurdle: BoxParams {
                 center_m: [2.0, 0.0, 0.175],
                 half_extents_m: [0.2, 1.0, 0.175],
@@ -411,7 +416,7 @@ impl CheetahSim {
                 &mut cheetah_colliders,
             );
             joints[i + 1] = world
-                .insert_multibody_joint(bodies[LEG_PARENT[i]], body, leg_joint(leg))
+                .insert_multibody_joint(bodies[LEG_PARENT[i]], body, leg_joint(leg, &params.solver))
                 .expect("invariant: a fresh body always joins its parent's multibody");
             bodies[i + 1] = body;
         }
@@ -574,6 +579,7 @@ fn cheetah_collider(params: &CheetahParams, a: Vector, b: Vector, density: f32) 
     ColliderBuilder::capsule_from_endpoints(a, b, params.capsule_radius_m)
         .density(density)
         .friction(params.friction)
+        .contact_skin(params.solver.contact_skin_m)
         .collision_groups(robot_groups())
 }
 
@@ -632,13 +638,14 @@ fn root_joint(params: &CheetahParams) -> GenericJoint {
 }
 
 /// A limited hinge about +y at the child's origin, placed at `body_pos` in the parent frame.
-fn leg_joint(leg: &LinkParams) -> GenericJoint {
+fn leg_joint(leg: &LinkParams, solver: &SolverParams) -> GenericJoint {
     let locked = JointAxesMask::LIN_AXES | JointAxesMask::ANG_X | JointAxesMask::ANG_Z;
     let [x, z] = leg.body_pos_m;
     GenericJointBuilder::new(locked)
         .local_frame1(Pose::from_translation(Vector::new(x, 0.0, z)))
         .local_frame2(Pose::IDENTITY)
         .limits(JointAxis::AngY, leg.range_rad)
+        .softness(solver.joint_limit_softness())
         .build()
 }
 

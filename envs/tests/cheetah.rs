@@ -282,8 +282,10 @@ fn step_before_reset_is_an_error() {
 
 #[test]
 fn invalid_params_are_reported_together() {
-    let mut params = CheetahParams::default();
-    params.timestep_secs = 0.0;
+    let mut params = CheetahParams {
+        timestep_secs: 0.0,
+        ..CheetahParams::default()
+    };
     params.bthigh.range_rad = [1.0, -1.0];
     match CheetahHurdle::new(params, false) {
         Err(EnvError::InvalidParam { field, .. }) => {
