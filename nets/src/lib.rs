@@ -16,6 +16,7 @@
 
 pub mod critic;
 pub mod encoder;
+pub mod from_config;
 pub mod error;
 pub mod init;
 pub mod linear;
@@ -26,6 +27,7 @@ pub mod weights;
 
 pub use critic::{q_from_distance, DistanceCritic, TwinCritic};
 pub use encoder::Encoder;
+pub use from_config::{spec_from_config, TaskDims};
 pub use error::{NetsError, Result};
 pub use init::{seeded_var_builder, LinearInit};
 pub use linear::{EnsembleLinear, Linear};
