@@ -117,33 +117,39 @@ fn five_thousand_random_steps_stay_finite() {
     assert_eq!(env.n_physics_failures(), 0);
 }
 
-/// Starts the cheetah just before the hurdle, running at `speed` m/s, and drives it forward.
-fn run_into_hurdle(speed: f32, action: &[f32], n_steps: usize) -> (f32, f32) {
+/// Starts the cheetah 1.4 m before the hurdle at `speed` m/s with a random height and pitch,
+/// drives it with random actions and returns the deepest overlap with the hurdle (metres).
+fn crash_into_hurdle(speed: f32, seed: u64) -> f32 {
     let mut env = train_env();
-    env.reset(0);
+    env.reset(seed);
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let mut qpos = [0.0; N_QPOS];
+    qpos[0] = 0.6;
+    qpos[1] = rng.random_range(-0.3..0.1);
+    qpos[2] = rng.random_range(-0.5..0.5);
     let mut qvel = [0.0; N_QPOS];
     qvel[0] = speed;
-    env.set_state([0.6, -0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], qvel)
-        .expect("finite state");
+    env.set_state(qpos, qvel).expect("finite state");
     let mut deepest: f32 = 0.0;
-    let mut max_x = f32::MIN;
-    for _ in 0..n_steps {
-        let step = env.step(action).expect("valid action");
+    for _ in 0..40 {
+        env.step(&random_action(&mut rng)).expect("valid action");
         deepest = deepest.max(env.hurdle_penetration_m());
-        max_x = max_x.max(step.obs[0]);
     }
-    (deepest, max_x)
+    deepest
 }
 
 #[test]
 fn the_hurdle_is_solid_when_the_cheetah_crashes_into_it() {
+    // Measured with the default 0.1 m contact prediction: at most ~6 mm at 10 m/s over 20 seeds
+    // (rapier's own 0.02 m lets a limb sink ~4 cm).
     for speed in [2.0, 5.0, 10.0] {
-        let (deepest, max_x) = run_into_hurdle(speed, &[0.0; N_ACTION], 60);
-        eprintln!("speed {speed}: deepest overlap {deepest:.4} m, max rootx {max_x:.3}");
-        assert!(
-            deepest < 0.03,
-            "at {speed} m/s a limb sank {deepest} m into the hurdle"
-        );
+        for seed in 0..4 {
+            let deepest = crash_into_hurdle(speed, seed);
+            assert!(
+                deepest < 0.03,
+                "at {speed} m/s (seed {seed}) a limb sank {deepest} m into the hurdle"
+            );
+        }
     }
 }
 
