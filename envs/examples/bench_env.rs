@@ -24,7 +24,10 @@ struct Args {
 }
 
 fn parse_args() -> Result<Args, String> {
-    let mut args = Args { task: DEFAULT_TASK.to_string(), steps: DEFAULT_STEPS };
+    let mut args = Args {
+        task: DEFAULT_TASK.to_string(),
+        steps: DEFAULT_STEPS,
+    };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let value = it.next().ok_or_else(|| format!("{flag} needs a value"))?;
@@ -41,8 +44,16 @@ fn parse_args() -> Result<Args, String> {
 }
 
 /// Steps `env` for `n_steps` with random actions; returns steps per second.
-fn run_repeat(env: &mut dyn Env, n_steps: u64, rng: &mut Pcg64Mcg, seed: &mut u64) -> Result<f64, String> {
-    let (low, high) = (env.spec().action_low.clone(), env.spec().action_high.clone());
+fn run_repeat(
+    env: &mut dyn Env,
+    n_steps: u64,
+    rng: &mut Pcg64Mcg,
+    seed: &mut u64,
+) -> Result<f64, String> {
+    let (low, high) = (
+        env.spec().action_low.clone(),
+        env.spec().action_high.clone(),
+    );
     let mut action = vec![0.0f32; low.len()];
     env.reset(*seed);
     let start = Instant::now();
@@ -71,7 +82,10 @@ fn run(args: &Args) -> Result<f64, String> {
     let mut rates = Vec::with_capacity(N_REPEATS);
     for repeat in 0..N_REPEATS {
         let rate = run_repeat(env.as_mut(), args.steps, &mut rng, &mut seed)?;
-        println!("repeat {repeat}: {} steps in task {}: {rate:.0} steps/s", args.steps, args.task);
+        println!(
+            "repeat {repeat}: {} steps in task {}: {rate:.0} steps/s",
+            args.steps, args.task
+        );
         rates.push(rate);
     }
     Ok(median(rates))

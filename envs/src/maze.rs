@@ -35,7 +35,12 @@ pub enum MazeLayout {
 
 impl MazeLayout {
     /// All layouts, in the order of the digest.
-    pub const ALL: [MazeLayout; 4] = [MazeLayout::U, MazeLayout::S, MazeLayout::W, MazeLayout::FourRooms];
+    pub const ALL: [MazeLayout; 4] = [
+        MazeLayout::U,
+        MazeLayout::S,
+        MazeLayout::W,
+        MazeLayout::FourRooms,
+    ];
 }
 
 /// Character of a wall cell in the layout maps.
@@ -63,14 +68,18 @@ const U_LAYOUT: LayoutData = LayoutData {
 
 /// S shape (digest §9.2, `AntMazeS-v1`): s = 4, robot (1, 1), goal (5, 5), T = 1000.
 const S_LAYOUT: LayoutData = LayoutData {
-    rows: &["#######", "#S....#", "#####.#", "#.....#", "#.#####", "#....G#", "#######"],
+    rows: &[
+        "#######", "#S....#", "#####.#", "#.....#", "#.#####", "#....G#", "#######",
+    ],
     cell_size_m: 4.0,
     max_steps: 1000,
 };
 
 /// W shape (digest §9.2, `AntMazeW-v1`): s = 4, robot (2, 1), goal (4, 1), T = 1000.
 const W_LAYOUT: LayoutData = LayoutData {
-    rows: &["#######", "#.....#", "#S###.#", "###...#", "#G###.#", "#.....#", "#######"],
+    rows: &[
+        "#######", "#.....#", "#S###.#", "###...#", "#G###.#", "#.....#", "#######",
+    ],
     cell_size_m: 4.0,
     max_steps: 1000,
 };
@@ -166,7 +175,10 @@ impl Maze {
         let data = layout_data(layout);
         let maze = Maze::from_rows(data.rows, data.cell_size_m, data.max_steps)
             .expect("built-in layouts are valid mazes (checked by tests/maze.rs)");
-        Maze { layout: Some(layout), ..maze }
+        Maze {
+            layout: Some(layout),
+            ..maze
+        }
     }
 
     /// A custom maze from map rows (`#` wall, `.` free, `S` robot cell, `G` goal cell).
@@ -175,7 +187,11 @@ impl Maze {
     /// `G`, every free cell is reachable from `S`, and `cell_size_m` is finite and positive.
     pub fn from_rows(rows: &[&str], cell_size_m: f32, max_steps: u32) -> Result<Maze, EnvError> {
         if !(cell_size_m.is_finite() && cell_size_m > 0.0) {
-            return Err(invalid("cell_size_m", cell_size_m, "must be finite and positive"));
+            return Err(invalid(
+                "cell_size_m",
+                cell_size_m,
+                "must be finite and positive",
+            ));
         }
         if max_steps == 0 {
             return Err(invalid("max_steps", max_steps, "must be positive"));
@@ -254,7 +270,11 @@ impl Maze {
     /// The free-cell map, row-major (`true` = free), `n_rows × n_cols`.
     pub fn free_map(&self) -> Vec<Vec<bool>> {
         (0..self.n_rows)
-            .map(|i| (0..self.n_cols).map(|j| self.is_free(Cell::new(i, j))).collect())
+            .map(|i| {
+                (0..self.n_cols)
+                    .map(|j| self.is_free(Cell::new(i, j)))
+                    .collect()
+            })
             .collect()
     }
 
@@ -285,7 +305,10 @@ impl Maze {
         let (ir, jr) = (self.robot_cell.i as f32, self.robot_cell.j as f32);
         Rect {
             low: [(0.5 - jr) * s, (0.5 - ir) * s],
-            high: [(self.n_cols as f32 - 1.5 - jr) * s, (self.n_rows as f32 - 1.5 - ir) * s],
+            high: [
+                (self.n_cols as f32 - 1.5 - jr) * s,
+                (self.n_rows as f32 - 1.5 - ir) * s,
+            ],
         }
     }
 
@@ -295,7 +318,10 @@ impl Maze {
         let (ir, jr) = (self.robot_cell.i as f32, self.robot_cell.j as f32);
         Rect {
             low: [(-0.5 - jr) * s, (-0.5 - ir) * s],
-            high: [(self.n_cols as f32 - 0.5 - jr) * s, (self.n_rows as f32 - 0.5 - ir) * s],
+            high: [
+                (self.n_cols as f32 - 0.5 - jr) * s,
+                (self.n_rows as f32 - 0.5 - ir) * s,
+            ],
         }
     }
 
@@ -327,7 +353,10 @@ impl Maze {
         self.wall_cells()
             .map(|c| {
                 let [x, y] = self.cell_center(c);
-                StaticBox { center: [x, y, s / 4.0], half_extents: [s / 2.0, s / 2.0, s / 4.0] }
+                StaticBox {
+                    center: [x, y, s / 4.0],
+                    half_extents: [s / 2.0, s / 2.0, s / 4.0],
+                }
             })
             .collect()
     }
@@ -354,7 +383,12 @@ impl Maze {
 
     /// The largest path distance from the robot cell to any free cell.
     pub fn max_start_distance(&self) -> u32 {
-        self.start_distance.iter().flatten().copied().max().unwrap_or(0)
+        self.start_distance
+            .iter()
+            .flatten()
+            .copied()
+            .max()
+            .unwrap_or(0)
     }
 
     /// Whether `goal` is a "far goal" (SPEC §6.4): its cell's path distance from the start is at
@@ -386,7 +420,10 @@ impl Maze {
         let left = cell.j.checked_sub(1).map(|j| Cell::new(cell.i, j));
         let down = Some(Cell::new(cell.i + 1, cell.j));
         let right = Some(Cell::new(cell.i, cell.j + 1));
-        [up, down, left, right].into_iter().flatten().filter(|&c| self.is_free(c))
+        [up, down, left, right]
+            .into_iter()
+            .flatten()
+            .filter(|&c| self.is_free(c))
     }
 
     /// Breadth-first distances (in cells) from a free cell to every cell, row-major.
@@ -407,8 +444,15 @@ impl Maze {
     }
 
     fn check_connected(&self) -> Result<(), EnvError> {
-        match self.free_cells().find(|&c| self.start_distance[self.index(c)].is_none()) {
-            Some(c) => Err(invalid("rows", format!("cell ({}, {})", c.i, c.j), "free cell unreachable from S")),
+        match self
+            .free_cells()
+            .find(|&c| self.start_distance[self.index(c)].is_none())
+        {
+            Some(c) => Err(invalid(
+                "rows",
+                format!("cell ({}, {})", c.i, c.j),
+                "free cell unreachable from S",
+            )),
             None => Ok(()),
         }
     }
@@ -435,13 +479,21 @@ struct ParsedGrid {
 fn parse_rows(rows: &[&str]) -> Result<ParsedGrid, EnvError> {
     let n_cols = rows.first().map_or(0, |r| r.chars().count());
     if rows.len() < 3 || n_cols < 3 {
-        return Err(invalid("rows", rows.len(), "a maze needs at least 3 × 3 cells"));
+        return Err(invalid(
+            "rows",
+            rows.len(),
+            "a maze needs at least 3 × 3 cells",
+        ));
     }
     let mut walls = Vec::with_capacity(rows.len() * n_cols);
     let (mut starts, mut goals) = (Vec::new(), Vec::new());
     for (i, row) in rows.iter().enumerate() {
         if row.chars().count() != n_cols {
-            return Err(invalid("rows", format!("row {i}"), "rows must all have the same length"));
+            return Err(invalid(
+                "rows",
+                format!("row {i}"),
+                "rows must all have the same length",
+            ));
         }
         for (j, ch) in row.chars().enumerate() {
             match ch {
@@ -455,19 +507,35 @@ fn parse_rows(rows: &[&str]) -> Result<ParsedGrid, EnvError> {
                     walls.push(false);
                     goals.push(Cell::new(i, j));
                 }
-                other => return Err(invalid("rows", format!("'{other}' at ({i}, {j})"), "use # . S G")),
+                other => {
+                    return Err(invalid(
+                        "rows",
+                        format!("'{other}' at ({i}, {j})"),
+                        "use # . S G",
+                    ))
+                }
             }
         }
     }
     let start = single_mark(&starts, START_CHAR)?;
     let goal = single_mark(&goals, GOAL_CHAR)?;
-    Ok(ParsedGrid { n_rows: rows.len(), n_cols, walls, start, goal })
+    Ok(ParsedGrid {
+        n_rows: rows.len(),
+        n_cols,
+        walls,
+        start,
+        goal,
+    })
 }
 
 fn single_mark(marks: &[Cell], ch: char) -> Result<Cell, EnvError> {
     match marks {
         [cell] => Ok(*cell),
-        _ => Err(invalid("rows", format!("{} '{ch}' cells", marks.len()), "exactly one is needed")),
+        _ => Err(invalid(
+            "rows",
+            format!("{} '{ch}' cells", marks.len()),
+            "exactly one is needed",
+        )),
     }
 }
 
@@ -477,7 +545,11 @@ fn check_border(grid: &ParsedGrid) -> Result<(), EnvError> {
     for i in 0..n_rows {
         for j in 0..n_cols {
             if on_border(i, j) && !grid.walls[i * n_cols + j] {
-                return Err(invalid("rows", format!("cell ({i}, {j})"), "the border must be walls"));
+                return Err(invalid(
+                    "rows",
+                    format!("cell ({i}, {j})"),
+                    "the border must be walls",
+                ));
             }
         }
     }
@@ -485,5 +557,9 @@ fn check_border(grid: &ParsedGrid) -> Result<(), EnvError> {
 }
 
 fn invalid(field: &str, value: impl std::fmt::Display, reason: &str) -> EnvError {
-    EnvError::InvalidParam { field: field.to_string(), value: value.to_string(), reason: reason.to_string() }
+    EnvError::InvalidParam {
+        field: field.to_string(),
+        value: value.to_string(),
+        reason: reason.to_string(),
+    }
 }

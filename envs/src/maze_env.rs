@@ -11,8 +11,8 @@
 //! - `step` validates the action before touching anything; a bad action is an error and changes
 //!   nothing. Valid actions are clipped to `[−bound, bound]`.
 //! - Observations handed out are finite. A non-finite observation from the robot ends the episode
-//!   (`terminated`, `info.physics_failure`), hands back the last finite observation and is
-//!   counted. After `terminated` or `truncated`, `step` is [`EnvError::NotReady`] until `reset`.
+//!   (`terminated`, `info.physics_failure`), hands back the last finite observation with reward
+//!   `−step_penalty` (no success, no fall: the state is unknown) and is counted. After `terminated` or `truncated`, `step` is [`EnvError::NotReady`] until `reset`.
 //! - Robots used here put their planar position in `obs[0..2]` (the achieved goal).
 
 use rand::SeedableRng;
@@ -72,9 +72,16 @@ impl MazeTaskParams {
     /// Checks every field; reports the first problem found.
     pub fn validate(&self) -> Result<(), EnvError> {
         if !(self.success_threshold_m.is_finite() && self.success_threshold_m > 0.0) {
-            return Err(invalid("success_threshold_m", self.success_threshold_m, "must be finite and positive"));
+            return Err(invalid(
+                "success_threshold_m",
+                self.success_threshold_m,
+                "must be finite and positive",
+            ));
         }
-        for (field, value) in [("step_penalty", self.step_penalty), ("fall_penalty", self.fall_penalty)] {
+        for (field, value) in [
+            ("step_penalty", self.step_penalty),
+            ("fall_penalty", self.fall_penalty),
+        ] {
             if !value.is_finite() {
                 return Err(invalid(field, value, "must be finite"));
             }
@@ -83,13 +90,27 @@ impl MazeTaskParams {
             || self.healthy_z_min_m > self.healthy_z_max_m
         {
             let range = format!("[{}, {}]", self.healthy_z_min_m, self.healthy_z_max_m);
-            return Err(invalid("healthy_z_min_m", range, "must be a finite range with min ≤ max"));
+            return Err(invalid(
+                "healthy_z_min_m",
+                range,
+                "must be a finite range with min ≤ max",
+            ));
         }
         if self.max_steps == Some(0) {
             return Err(invalid("max_steps", 0, "must be positive"));
         }
         Ok(())
     }
+}
+
+/// Reward of one state and the two facts it depends on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RewardOutcome {
+    pub reward: f32,
+    /// `‖xy − g‖ < success_threshold_m`.
+    pub success: bool,
+    /// The torso height is outside the healthy range (robots with a torso only).
+    pub fell: bool,
 }
 
 /// A robot in a maze, chasing a goal.
@@ -114,7 +135,13 @@ pub struct MazeEnv<R: Robot> {
 
 impl<R: Robot> MazeEnv<R> {
     /// A task named `name` (registry name) around `robot` in `maze`. Call `reset` before `step`.
-    pub fn new(name: &str, maze: Maze, robot: R, variant: Variant, params: MazeTaskParams) -> Result<Self, EnvError> {
+    pub fn new(
+        name: &str,
+        maze: Maze,
+        robot: R,
+        variant: Variant,
+        params: MazeTaskParams,
+    ) -> Result<Self, EnvError> {
         params.validate()?;
         let spec = build_spec(name, &maze, &robot, variant, &params);
         let obs_dim = robot.obs_dim();
@@ -153,16 +180,21 @@ impl<R: Robot> MazeEnv<R> {
         self.n_steps
     }
 
-    /// Reward of being at `xy` with torso height `torso_z`, and whether that is a success and a
-    /// fall (pure; the rule of the module docs).
-    pub fn reward_at(&self, xy: [f32; 2], torso_z: Option<f32>) -> (f32, bool, bool) {
-        let success = distance(xy, self.goal) < self.params.success_threshold_m;
-        let fell = torso_z.is_some_and(|z| !(self.params.healthy_z_min_m..=self.params.healthy_z_max_m).contains(&z));
-        let mut reward = if success { 0.0 } else { -self.params.step_penalty };
+    /// Reward of being at `xy` with torso height `torso_z` under the current goal (pure; the rule
+    /// of the module docs).
+    pub fn reward_at(&self, xy: [f32; 2], torso_z: Option<f32>) -> RewardOutcome {
+        let p = &self.params;
+        let success = distance(xy, self.goal) < p.success_threshold_m;
+        let fell = torso_z.is_some_and(|z| !(p.healthy_z_min_m..=p.healthy_z_max_m).contains(&z));
+        let mut reward = if success { 0.0 } else { -p.step_penalty };
         if fell {
-            reward -= self.params.fall_penalty;
+            reward -= p.fall_penalty;
         }
-        (reward, success, fell)
+        RewardOutcome {
+            reward,
+            success,
+            fell,
+        }
     }
 
     fn clip_action(&mut self, action: &[f32]) {
@@ -177,8 +209,19 @@ impl<R: Robot> MazeEnv<R> {
         self.n_physics_failures += 1;
         self.ready = false;
         let achieved_goal = self.achieved_goal(&self.last_obs);
-        let info = StepInfo { success: false, achieved_goal, physics_failure: true, fell: false };
-        Step { obs: self.last_obs.clone(), reward: -self.params.step_penalty, terminated: true, truncated, info }
+        let info = StepInfo {
+            success: false,
+            achieved_goal,
+            physics_failure: true,
+            fell: false,
+        };
+        Step {
+            obs: self.last_obs.clone(),
+            reward: -self.params.step_penalty,
+            terminated: true,
+            truncated,
+            info,
+        }
     }
 }
 
@@ -197,12 +240,18 @@ impl<R: Robot> Env for MazeEnv<R> {
         self.n_steps = 0;
         self.ready = true;
         self.robot.write_obs(&mut self.last_obs);
-        Reset { obs: self.last_obs.clone(), goal: self.goal, achieved_goal: self.achieved_goal(&self.last_obs) }
+        Reset {
+            obs: self.last_obs.clone(),
+            goal: self.goal,
+            achieved_goal: self.achieved_goal(&self.last_obs),
+        }
     }
 
     fn step(&mut self, action: &[f32]) -> Result<Step, EnvError> {
         if !self.ready {
-            return Err(EnvError::NotReady { task: self.spec.name.clone() });
+            return Err(EnvError::NotReady {
+                task: self.spec.name.clone(),
+            });
         }
         validate_action(&self.spec, action)?;
         self.clip_action(action);
@@ -216,11 +265,26 @@ impl<R: Robot> Env for MazeEnv<R> {
         }
         std::mem::swap(&mut self.last_obs, &mut self.next_obs);
         let achieved_goal = self.achieved_goal(&self.last_obs);
-        let (reward, success, fell) = self.reward_at(achieved_goal, torso_z);
+        let RewardOutcome {
+            reward,
+            success,
+            fell,
+        } = self.reward_at(achieved_goal, torso_z);
         let terminated = success && self.spec.terminate_on_success;
         self.ready = !(terminated || truncated);
-        let info = StepInfo { success, achieved_goal, physics_failure: false, fell };
-        Ok(Step { obs: self.last_obs.clone(), reward, terminated, truncated, info })
+        let info = StepInfo {
+            success,
+            achieved_goal,
+            physics_failure: false,
+            fell,
+        };
+        Ok(Step {
+            obs: self.last_obs.clone(),
+            reward,
+            terminated,
+            truncated,
+            info,
+        })
     }
 
     fn goal(&self) -> [f32; 2] {
@@ -229,11 +293,19 @@ impl<R: Robot> Env for MazeEnv<R> {
 
     fn set_goal(&mut self, goal: [f32; 2]) -> Result<(), EnvError> {
         if !(goal[0].is_finite() && goal[1].is_finite()) {
-            return Err(EnvError::InvalidGoal { x: goal[0], y: goal[1], reason: "not finite".to_string() });
+            return Err(EnvError::InvalidGoal {
+                x: goal[0],
+                y: goal[1],
+                reason: "not finite".to_string(),
+            });
         }
         if !self.maze.is_free_xy(goal) {
             let reason = "not in a free cell of the maze".to_string();
-            return Err(EnvError::InvalidGoal { x: goal[0], y: goal[1], reason });
+            return Err(EnvError::InvalidGoal {
+                x: goal[0],
+                y: goal[1],
+                reason,
+            });
         }
         self.goal = goal;
         Ok(())
@@ -252,7 +324,13 @@ impl<R: Robot> Env for MazeEnv<R> {
     }
 }
 
-fn build_spec<R: Robot>(name: &str, maze: &Maze, robot: &R, variant: Variant, params: &MazeTaskParams) -> EnvSpec {
+fn build_spec<R: Robot>(
+    name: &str,
+    maze: &Maze,
+    robot: &R,
+    variant: Variant,
+    params: &MazeTaskParams,
+) -> EnvSpec {
     let bound = robot.action_bound();
     EnvSpec {
         name: name.to_string(),
@@ -273,5 +351,9 @@ fn distance(a: [f32; 2], b: [f32; 2]) -> f32 {
 }
 
 fn invalid(field: &str, value: impl std::fmt::Display, reason: &str) -> EnvError {
-    EnvError::InvalidParam { field: format!("task.{field}"), value: value.to_string(), reason: reason.to_string() }
+    EnvError::InvalidParam {
+        field: format!("task.{field}"),
+        value: value.to_string(),
+        reason: reason.to_string(),
+    }
 }

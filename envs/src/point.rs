@@ -103,20 +103,36 @@ impl PointParams {
 
     fn validate_rest(&self) -> Result<(), EnvError> {
         if !(self.damping_n_s_per_m.is_finite() && self.damping_n_s_per_m >= 0.0) {
-            return Err(invalid("damping_n_s_per_m", self.damping_n_s_per_m, "must be finite and ≥ 0"));
+            return Err(invalid(
+                "damping_n_s_per_m",
+                self.damping_n_s_per_m,
+                "must be finite and ≥ 0",
+            ));
         }
         if !(self.reset_noise_m.is_finite() && self.reset_noise_m >= 0.0) {
-            return Err(invalid("reset_noise_m", self.reset_noise_m, "must be finite and ≥ 0"));
+            return Err(invalid(
+                "reset_noise_m",
+                self.reset_noise_m,
+                "must be finite and ≥ 0",
+            ));
         }
         if self.n_substeps == 0 {
             return Err(invalid("n_substeps", self.n_substeps, "must be at least 1"));
         }
         let dt = self.substep_secs();
         if self.damping_n_s_per_m * dt / self.mass_kg >= 1.0 {
-            return Err(invalid("damping_n_s_per_m", self.damping_n_s_per_m, "c·dt_sub/m must be < 1 (stability)"));
+            return Err(invalid(
+                "damping_n_s_per_m",
+                self.damping_n_s_per_m,
+                "c·dt_sub/m must be < 1 (stability)",
+            ));
         }
         if self.max_speed_m_per_s * dt >= self.radius_m {
-            return Err(invalid("max_speed_m_per_s", self.max_speed_m_per_s, "max_speed·dt_sub must be < radius (no tunnelling)"));
+            return Err(invalid(
+                "max_speed_m_per_s",
+                self.max_speed_m_per_s,
+                "max_speed·dt_sub must be < radius (no tunnelling)",
+            ));
         }
         Ok(())
     }
@@ -150,7 +166,10 @@ impl PointMass {
         let dt_sub = params.substep_secs();
         let walls = walls
             .iter()
-            .map(|b| Wall2 { center: [b.center[0], b.center[1]], half: [b.half_extents[0], b.half_extents[1]] })
+            .map(|b| Wall2 {
+                center: [b.center[0], b.center[1]],
+                half: [b.half_extents[0], b.half_extents[1]],
+            })
             .collect();
         Ok(PointMass {
             params,
@@ -186,13 +205,10 @@ impl PointMass {
 
     /// One semi-implicit Euler sub-step under `force` (newtons), then the speed cap and contacts.
     fn substep(&mut self, force: [f32; 2]) {
-        for d in 0..2 {
-            self.vel[d] = self.vel[d] * self.decay + force[d] * self.dt_over_mass;
-        }
+        let (decay, dt_over_mass) = (self.decay, self.dt_over_mass);
+        self.vel = [0, 1].map(|d| self.vel[d] * decay + force[d] * dt_over_mass);
         self.cap_speed();
-        for d in 0..2 {
-            self.pos[d] += self.vel[d] * self.dt_sub;
-        }
+        self.pos = [0, 1].map(|d| self.pos[d] + self.vel[d] * self.dt_sub);
         self.resolve_contacts();
     }
 
@@ -209,10 +225,16 @@ impl PointMass {
         let radius = self.params.radius_m;
         for i in 0..self.walls.len() {
             if let Some((normal, depth)) = penetration(self.pos, radius, &self.walls[i]) {
-                self.pos = [self.pos[0] + normal[0] * depth, self.pos[1] + normal[1] * depth];
+                self.pos = [
+                    self.pos[0] + normal[0] * depth,
+                    self.pos[1] + normal[1] * depth,
+                ];
                 let inward = self.vel[0] * normal[0] + self.vel[1] * normal[1];
                 if inward < 0.0 {
-                    self.vel = [self.vel[0] - inward * normal[0], self.vel[1] - inward * normal[1]];
+                    self.vel = [
+                        self.vel[0] - inward * normal[0],
+                        self.vel[1] - inward * normal[1],
+                    ];
                 }
             }
         }
@@ -229,7 +251,10 @@ fn penetration(pos: [f32; 2], radius: f32, wall: &Wall2) -> Option<([f32; 2], f3
     if inside {
         return Some(centre_inside_push(d, radius, wall));
     }
-    let closest = [d[0].clamp(-wall.half[0], wall.half[0]), d[1].clamp(-wall.half[1], wall.half[1])];
+    let closest = [
+        d[0].clamp(-wall.half[0], wall.half[0]),
+        d[1].clamp(-wall.half[1], wall.half[1]),
+    ];
     let delta = [d[0] - closest[0], d[1] - closest[1]];
     let dist_sq = delta[0] * delta[0] + delta[1] * delta[1];
     if dist_sq >= radius * radius {
@@ -277,12 +302,18 @@ impl Robot for PointMass {
 
     fn reset(&mut self, rng: &mut rand_pcg::Pcg64Mcg) {
         let noise = self.params.reset_noise_m;
-        self.pos = [rng.random_range(-noise..=noise), rng.random_range(-noise..=noise)];
+        self.pos = [
+            rng.random_range(-noise..=noise),
+            rng.random_range(-noise..=noise),
+        ];
         self.vel = [0.0; 2];
     }
 
     fn step(&mut self, action: &[f32]) {
-        let force = [action[0] * self.params.max_force_n, action[1] * self.params.max_force_n];
+        let force = [
+            action[0] * self.params.max_force_n,
+            action[1] * self.params.max_force_n,
+        ];
         for _ in 0..self.params.n_substeps {
             self.substep(force);
         }
@@ -302,5 +333,9 @@ impl Robot for PointMass {
 }
 
 fn invalid(field: &str, value: impl std::fmt::Display, reason: &str) -> EnvError {
-    EnvError::InvalidParam { field: format!("point.{field}"), value: value.to_string(), reason: reason.to_string() }
+    EnvError::InvalidParam {
+        field: format!("point.{field}"),
+        value: value.to_string(),
+        reason: reason.to_string(),
+    }
 }

@@ -37,7 +37,11 @@ pub enum Task {
 }
 
 const fn maze(robot: RobotKind, layout: MazeLayout, variant: Variant) -> Task {
-    Task::Maze(TaskId { robot, layout, variant })
+    Task::Maze(TaskId {
+        robot,
+        layout,
+        variant,
+    })
 }
 
 use MazeLayout::{FourRooms, S, U, W};
@@ -75,7 +79,10 @@ pub fn parse_task(name: &str) -> Result<Task, EnvError> {
         .iter()
         .find(|(known, _)| *known == name)
         .map(|(_, task)| *task)
-        .ok_or_else(|| EnvError::UnknownTask { name: name.to_string(), known: task_names().join(", ") })
+        .ok_or_else(|| EnvError::UnknownTask {
+            name: name.to_string(),
+            known: task_names().join(", "),
+        })
 }
 
 /// The registry name of a task (inverse of [`parse_task`]).
@@ -102,9 +109,18 @@ pub struct MazeRobotParams {
 }
 
 /// Builds a maze task with explicit parameters.
-pub fn make_maze(id: TaskId, robot: &MazeRobotParams, task: MazeTaskParams) -> Result<Box<dyn Env>, EnvError> {
+pub fn make_maze(
+    id: TaskId,
+    robot: &MazeRobotParams,
+    task: MazeTaskParams,
+) -> Result<Box<dyn Env>, EnvError> {
     Ok(match id.robot {
-        RobotKind::Ant => Box::new(make_ant_maze(id.layout, id.variant, robot.ant.clone(), task)?),
+        RobotKind::Ant => Box::new(make_ant_maze(
+            id.layout,
+            id.variant,
+            robot.ant.clone(),
+            task,
+        )?),
         RobotKind::Point => Box::new(make_point_maze(id.layout, id.variant, robot.point, task)?),
     })
 }
@@ -116,7 +132,11 @@ pub fn make_ant_maze(
     params: AntParams,
     task: MazeTaskParams,
 ) -> Result<MazeEnv<Ant>, EnvError> {
-    let id = TaskId { robot: RobotKind::Ant, layout, variant };
+    let id = TaskId {
+        robot: RobotKind::Ant,
+        layout,
+        variant,
+    };
     let maze = Maze::new(layout);
     let ant = Ant::new(params, &maze.walls())?;
     MazeEnv::new(task_name(Task::Maze(id)), maze, ant, variant, task)
@@ -129,7 +149,11 @@ pub fn make_point_maze(
     params: PointParams,
     task: MazeTaskParams,
 ) -> Result<MazeEnv<PointMass>, EnvError> {
-    let id = TaskId { robot: RobotKind::Point, layout, variant };
+    let id = TaskId {
+        robot: RobotKind::Point,
+        layout,
+        variant,
+    };
     let maze = Maze::new(layout);
     let point = PointMass::new(params, &maze.walls())?;
     MazeEnv::new(task_name(Task::Maze(id)), maze, point, variant, task)

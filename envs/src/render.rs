@@ -43,7 +43,10 @@ struct PixelMap {
 impl PixelMap {
     fn new(bounds: Rect) -> PixelMap {
         let longest_m = bounds.width().max(bounds.height());
-        PixelMap { bounds, px_per_m: IMAGE_SIDE_PX as f32 / longest_m }
+        PixelMap {
+            bounds,
+            px_per_m: IMAGE_SIDE_PX as f32 / longest_m,
+        }
     }
 
     fn size(&self) -> (u32, u32) {
@@ -64,9 +67,17 @@ impl PixelMap {
 }
 
 /// Draws `maze` (walls, start, goal) and `trajectory` (xy points, metres) into a PNG at `path`.
-pub fn render_maze_png(maze: &Maze, trajectory: &[[f32; 2]], goal: [f32; 2], path: &Path) -> Result<(), RenderError> {
+pub fn render_maze_png(
+    maze: &Maze,
+    trajectory: &[[f32; 2]],
+    goal: [f32; 2],
+    path: &Path,
+) -> Result<(), RenderError> {
     let map = PixelMap::new(maze.world_bounds());
-    let fail = |e: &dyn std::fmt::Display| RenderError::Drawing { path: path.display().to_string(), message: e.to_string() };
+    let fail = |e: &dyn std::fmt::Display| RenderError::Drawing {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
     let root = BitMapBackend::new(path, map.size()).into_drawing_area();
     root.fill(&WHITE).map_err(|e| fail(&e))?;
     draw_walls(&root, &map, maze).map_err(|e| fail(&e))?;
@@ -76,7 +87,8 @@ pub fn render_maze_png(maze: &Maze, trajectory: &[[f32; 2]], goal: [f32; 2], pat
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
-type DrawResult<'a> = Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
+type DrawResult<'a> =
+    Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
 
 fn draw_walls<'a>(root: &Area<'a>, map: &PixelMap, maze: &Maze) -> DrawResult<'a> {
     let half = maze.cell_size_m() / 2.0;
@@ -88,22 +100,37 @@ fn draw_walls<'a>(root: &Area<'a>, map: &PixelMap, maze: &Maze) -> DrawResult<'a
     Ok(())
 }
 
-fn draw_markers<'a>(root: &Area<'a>, map: &PixelMap, start: [f32; 2], goal: [f32; 2]) -> DrawResult<'a> {
+fn draw_markers<'a>(
+    root: &Area<'a>,
+    map: &PixelMap,
+    start: [f32; 2],
+    goal: [f32; 2],
+) -> DrawResult<'a> {
     let marker = map.len(MARKER_RADIUS_M);
     root.draw(&Circle::new(map.px(start), marker, START_COLOR.filled()))?;
     if goal[0].is_finite() && goal[1].is_finite() {
-        root.draw(&Circle::new(map.px(goal), map.len(GOAL_RING_M), GOAL_COLOR.stroke_width(2)))?;
+        root.draw(&Circle::new(
+            map.px(goal),
+            map.len(GOAL_RING_M),
+            GOAL_COLOR.stroke_width(2),
+        ))?;
         root.draw(&Circle::new(map.px(goal), marker, GOAL_COLOR.filled()))?;
     }
     Ok(())
 }
 
 fn draw_trajectory<'a>(root: &Area<'a>, map: &PixelMap, trajectory: &[[f32; 2]]) -> DrawResult<'a> {
-    let points: Vec<(i32, i32)> =
-        trajectory.iter().filter(|p| p[0].is_finite() && p[1].is_finite()).map(|&p| map.px(p)).collect();
+    let points: Vec<(i32, i32)> = trajectory
+        .iter()
+        .filter(|p| p[0].is_finite() && p[1].is_finite())
+        .map(|&p| map.px(p))
+        .collect();
     let Some(&end) = points.last() else {
         return Ok(());
     };
-    root.draw(&PathElement::new(points, TRAJECTORY_COLOR.stroke_width(TRAJECTORY_WIDTH_PX)))?;
+    root.draw(&PathElement::new(
+        points,
+        TRAJECTORY_COLOR.stroke_width(TRAJECTORY_WIDTH_PX),
+    ))?;
     root.draw(&Circle::new(end, END_DOT_PX, TRAJECTORY_COLOR.filled()))
 }

@@ -25,7 +25,11 @@ fn coverage_counts_visited_free_cells_once_each() {
     coverage.visit([0.1, 0.1]); // same 0.6 m cell as (0, 0): [−0.2, 0.4)²
     assert_eq!(coverage.n_visited_free_cells(), 1);
     assert_eq!(coverage.n_visits(), 2);
-    assert_eq!(coverage.count(3, 3), Some(2), "(0, 0) is in cell (⌊2/0.6⌋, ⌊2/0.6⌋) = (3, 3)");
+    assert_eq!(
+        coverage.count(3, 3),
+        Some(2),
+        "(0, 0) is in cell (⌊2/0.6⌋, ⌊2/0.6⌋) = (3, 3)"
+    );
     coverage.visit([8.0, 8.0]);
     assert_eq!(coverage.n_visited_free_cells(), 2);
     assert!((coverage.coverage() - 2.0 / U_FREE_COVERAGE_CELLS as f64).abs() < 1e-12);
@@ -43,7 +47,13 @@ fn visits_in_walls_are_counted_but_do_not_raise_coverage() {
 #[test]
 fn points_outside_the_goal_box_or_not_finite_are_ignored_and_counted() {
     let mut coverage = Coverage::new(&Maze::new(MazeLayout::U));
-    for xy in [[50.0, 0.0], [-2.1, 0.0], [0.0, 10.1], [f32::NAN, 0.0], [0.0, f32::INFINITY]] {
+    for xy in [
+        [50.0, 0.0],
+        [-2.1, 0.0],
+        [0.0, 10.1],
+        [f32::NAN, 0.0],
+        [0.0, f32::INFINITY],
+    ] {
         coverage.visit(xy);
     }
     assert_eq!(coverage.n_outside(), 5);
@@ -57,8 +67,10 @@ fn visiting_every_free_cell_gives_full_coverage_in_every_maze() {
     for layout in MazeLayout::ALL {
         let mut coverage = Coverage::new(&Maze::new(layout));
         let (n_x, n_y) = coverage.shape();
-        let centres: Vec<[f32; 2]> =
-            (0..n_y).flat_map(|iy| (0..n_x).map(move |ix| (ix, iy))).map(|(ix, iy)| coverage.cell_centre(ix, iy)).collect();
+        let centres: Vec<[f32; 2]> = (0..n_y)
+            .flat_map(|iy| (0..n_x).map(move |ix| (ix, iy)))
+            .map(|(ix, iy)| coverage.cell_centre(ix, iy))
+            .collect();
         coverage.visit_all(&centres);
         assert_eq!(coverage.coverage(), 1.0, "{layout:?}");
         assert_eq!(coverage.n_visited_free_cells(), coverage.n_free_cells());
@@ -81,5 +93,10 @@ fn a_non_positive_cell_size_is_an_error() {
     let maze = Maze::new(MazeLayout::U);
     assert!(Coverage::with_cell_size(&maze, 0.0).is_err());
     assert!(Coverage::with_cell_size(&maze, f32::NAN).is_err());
-    assert_eq!(Coverage::with_cell_size(&maze, 4.0).expect("valid").n_free_cells(), 7);
+    assert_eq!(
+        Coverage::with_cell_size(&maze, 4.0)
+            .expect("valid")
+            .n_free_cells(),
+        7
+    );
 }

@@ -10,7 +10,9 @@ use rand_pcg::Pcg64Mcg;
 /// Free cells of each layout, typed from the digest's pictures (row, column).
 fn expected_free_cells(layout: MazeLayout) -> Vec<(usize, usize)> {
     let rows = |spec: &[(usize, &[usize])]| -> Vec<(usize, usize)> {
-        spec.iter().flat_map(|&(i, js)| js.iter().map(move |&j| (i, j))).collect()
+        spec.iter()
+            .flat_map(|&(i, js)| js.iter().map(move |&j| (i, j)))
+            .collect()
     };
     match layout {
         MazeLayout::U => rows(&[(1, &[1, 2, 3]), (2, &[3]), (3, &[1, 2, 3])]),
@@ -54,8 +56,16 @@ fn walls_are_exactly_where_each_layout_says() {
         for i in 0..maze.n_rows() {
             for j in 0..maze.n_cols() {
                 let free = expected.contains(&(i, j));
-                assert_eq!(maze.is_free(Cell::new(i, j)), free, "{layout:?} cell ({i}, {j})");
-                assert_eq!(maze.is_wall(Cell::new(i, j)), !free, "{layout:?} cell ({i}, {j})");
+                assert_eq!(
+                    maze.is_free(Cell::new(i, j)),
+                    free,
+                    "{layout:?} cell ({i}, {j})"
+                );
+                assert_eq!(
+                    maze.is_wall(Cell::new(i, j)),
+                    !free,
+                    "{layout:?} cell ({i}, {j})"
+                );
             }
         }
         assert_eq!(maze.free_cells().count(), expected.len(), "{layout:?}");
@@ -92,7 +102,11 @@ fn start_and_goal_cells_and_test_goals_match_the_digest() {
         assert_eq!(maze.robot_cell(), Cell::new(robot.0, robot.1), "{layout:?}");
         assert_eq!(maze.goal_cell(), Cell::new(goal.0, goal.1), "{layout:?}");
         assert_eq!(maze.test_goal(), test_goal, "{layout:?}");
-        assert_eq!(maze.cell_center(maze.robot_cell()), [0.0, 0.0], "{layout:?}: start at the origin");
+        assert_eq!(
+            maze.cell_center(maze.robot_cell()),
+            [0.0, 0.0],
+            "{layout:?}: start at the origin"
+        );
     }
 }
 
@@ -105,7 +119,11 @@ fn goal_boxes_match_the_digest() {
         (MazeLayout::FourRooms, [-3.0, -3.0], [15.0, 15.0]),
     ];
     for (layout, low, high) in expected {
-        assert_eq!(Maze::new(layout).goal_box(), Rect { low, high }, "{layout:?}");
+        assert_eq!(
+            Maze::new(layout).goal_box(),
+            Rect { low, high },
+            "{layout:?}"
+        );
     }
 }
 
@@ -115,13 +133,21 @@ fn wall_boxes_are_half_a_cell_tall_and_centred_on_wall_cells() {
     let walls = maze.walls();
     assert_eq!(walls.len(), 25 - 7);
     // Cell (2, 1) is the wall between the arms of the U: centre ((1−1)·4, (2−1)·4) = (0, 4).
-    let inner = walls.iter().find(|b| b.center[0] == 0.0 && b.center[1] == 4.0).expect("inner wall");
+    let inner = walls
+        .iter()
+        .find(|b| b.center[0] == 0.0 && b.center[1] == 4.0)
+        .expect("inner wall");
     assert_eq!(inner.center[2], 1.0);
     assert_eq!(inner.half_extents, [2.0, 2.0, 1.0]);
     let four_rooms = Maze::new(MazeLayout::FourRooms);
-    assert!(four_rooms.walls().iter().all(|b| b.half_extents == [1.0, 1.0, 0.5] && b.center[2] == 0.5));
+    assert!(four_rooms
+        .walls()
+        .iter()
+        .all(|b| b.half_extents == [1.0, 1.0, 0.5] && b.center[2] == 0.5));
     for wall in four_rooms.walls() {
-        let cell = four_rooms.cell_of([wall.center[0], wall.center[1]]).expect("wall inside the grid");
+        let cell = four_rooms
+            .cell_of([wall.center[0], wall.center[1]])
+            .expect("wall inside the grid");
         assert!(four_rooms.is_wall(cell));
     }
 }
@@ -147,16 +173,45 @@ fn cell_lookup_follows_the_codes_ceil_rule() {
 fn bfs_path_distances_on_u_match_hand_computed_values() {
     let maze = Maze::new(MazeLayout::U);
     // Along the U from S = (1, 1): (1,2) 1, (1,3) 2, (2,3) 3, (3,3) 4, (3,2) 5, (3,1) 6.
-    let expected = [((1, 1), 0), ((1, 2), 1), ((1, 3), 2), ((2, 3), 3), ((3, 3), 4), ((3, 2), 5), ((3, 1), 6)];
+    let expected = [
+        ((1, 1), 0),
+        ((1, 2), 1),
+        ((1, 3), 2),
+        ((2, 3), 3),
+        ((3, 3), 4),
+        ((3, 2), 5),
+        ((3, 1), 6),
+    ];
     for ((i, j), d) in expected {
-        assert_eq!(maze.start_distance(Cell::new(i, j)), Some(d), "cell ({i}, {j})");
-        assert_eq!(maze.path_distance(Cell::new(1, 1), Cell::new(i, j)), Some(d));
+        assert_eq!(
+            maze.start_distance(Cell::new(i, j)),
+            Some(d),
+            "cell ({i}, {j})"
+        );
+        assert_eq!(
+            maze.path_distance(Cell::new(1, 1), Cell::new(i, j)),
+            Some(d)
+        );
     }
     assert_eq!(maze.max_start_distance(), 6);
-    assert_eq!(maze.path_distance(Cell::new(3, 1), Cell::new(1, 3)), Some(4));
-    assert_eq!(maze.path_distance(Cell::new(3, 2), Cell::new(3, 2)), Some(0));
-    assert_eq!(maze.path_distance(Cell::new(1, 1), Cell::new(2, 1)), None, "wall");
-    assert_eq!(maze.path_distance(Cell::new(1, 1), Cell::new(9, 9)), None, "outside");
+    assert_eq!(
+        maze.path_distance(Cell::new(3, 1), Cell::new(1, 3)),
+        Some(4)
+    );
+    assert_eq!(
+        maze.path_distance(Cell::new(3, 2), Cell::new(3, 2)),
+        Some(0)
+    );
+    assert_eq!(
+        maze.path_distance(Cell::new(1, 1), Cell::new(2, 1)),
+        None,
+        "wall"
+    );
+    assert_eq!(
+        maze.path_distance(Cell::new(1, 1), Cell::new(9, 9)),
+        None,
+        "outside"
+    );
 }
 
 #[test]
@@ -175,7 +230,14 @@ fn far_goal_rule_on_u_selects_the_bottom_row_like_the_codes_y_at_least_8() {
     for goal in [[0.0, 8.0], [4.0, 8.0], [8.0, 8.0], [-1.9, 9.9], [9.0, 6.5]] {
         assert!(maze.is_far_goal(goal), "{goal:?}");
     }
-    for goal in [[0.0, 0.0], [8.0, 0.0], [8.0, 4.0], [8.0, 6.0], [0.0, 4.0], [f32::NAN, 8.0]] {
+    for goal in [
+        [0.0, 0.0],
+        [8.0, 0.0],
+        [8.0, 4.0],
+        [8.0, 6.0],
+        [0.0, 4.0],
+        [f32::NAN, 8.0],
+    ] {
         assert!(!maze.is_far_goal(goal), "{goal:?}");
     }
     let mut rng = Pcg64Mcg::seed_from_u64(7);

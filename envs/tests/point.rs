@@ -12,7 +12,8 @@ const CONTACT_TOLERANCE_M: f32 = 1e-4;
 
 fn ball_in(layout: MazeLayout) -> (Maze, PointMass) {
     let maze = Maze::new(layout);
-    let ball = PointMass::new(PointParams::default(), &maze.walls()).expect("default params are valid");
+    let ball =
+        PointMass::new(PointParams::default(), &maze.walls()).expect("default params are valid");
     (maze, ball)
 }
 
@@ -35,18 +36,33 @@ fn the_point_mass_cannot_pass_through_a_wall() {
     // From the start, push into the inner wall of the U (its face is at y = 2) for 200 steps.
     for _ in 0..200 {
         ball.step(&[0.0, 1.0]);
-        assert!(ball.xy()[1] <= 2.0 - radius + CONTACT_TOLERANCE_M, "{:?}", ball.xy());
+        assert!(
+            ball.xy()[1] <= 2.0 - radius + CONTACT_TOLERANCE_M,
+            "{:?}",
+            ball.xy()
+        );
     }
-    assert!(ball.velocity()[1].abs() < 1e-3, "the inward velocity is cancelled");
+    assert!(
+        ball.velocity()[1].abs() < 1e-3,
+        "the inward velocity is cancelled"
+    );
     // Then push left into the outer wall (face at x = −2) and diagonally into the corner.
     for action in [[-1.0, 0.0], [-1.0, -1.0]] {
         for _ in 0..200 {
             ball.step(&action);
-            assert!(clearance(&maze, ball.xy()) >= radius - CONTACT_TOLERANCE_M, "{:?}", ball.xy());
+            assert!(
+                clearance(&maze, ball.xy()) >= radius - CONTACT_TOLERANCE_M,
+                "{:?}",
+                ball.xy()
+            );
         }
     }
     let corner = [-2.0 + radius, -2.0 + radius];
-    assert!((ball.xy()[0] - corner[0]).abs() < 1e-3 && (ball.xy()[1] - corner[1]).abs() < 1e-3, "{:?}", ball.xy());
+    assert!(
+        (ball.xy()[0] - corner[0]).abs() < 1e-3 && (ball.xy()[1] - corner[1]).abs() < 1e-3,
+        "{:?}",
+        ball.xy()
+    );
 }
 
 #[test]
@@ -55,7 +71,11 @@ fn a_ball_placed_inside_a_wall_is_pushed_out_through_the_nearest_face() {
     // Inner wall spans y ∈ [2, 6]; at y = 2.3 the nearest face is y = 2.
     ball.set_state([0.0, 2.3], [0.0, 0.0]);
     ball.step(&[0.0, 0.0]);
-    assert!((ball.xy()[1] - (2.0 - ball.params().radius_m)).abs() < 1e-4, "{:?}", ball.xy());
+    assert!(
+        (ball.xy()[1] - (2.0 - ball.params().radius_m)).abs() < 1e-4,
+        "{:?}",
+        ball.xy()
+    );
 }
 
 #[test]
@@ -70,9 +90,16 @@ fn ten_thousand_random_steps_stay_finite_and_out_of_the_walls() {
             ball.step(&action);
             ball.write_obs(&mut obs);
             assert!(obs.iter().all(|v| v.is_finite()), "{layout:?}: {obs:?}");
-            assert!(clearance(&maze, ball.xy()) >= radius - CONTACT_TOLERANCE_M, "{layout:?}: {:?}", ball.xy());
+            assert!(
+                clearance(&maze, ball.xy()) >= radius - CONTACT_TOLERANCE_M,
+                "{layout:?}: {:?}",
+                ball.xy()
+            );
             let speed = (obs[2] * obs[2] + obs[3] * obs[3]).sqrt();
-            assert!(speed <= ball.params().max_speed_m_per_s + 1e-4, "{layout:?}: speed {speed}");
+            assert!(
+                speed <= ball.params().max_speed_m_per_s + 1e-4,
+                "{layout:?}: speed {speed}"
+            );
         }
     }
 }
@@ -99,7 +126,10 @@ fn observation_is_position_then_velocity() {
     let mut obs = [0.0f32; 4];
     ball.write_obs(&mut obs);
     assert_eq!(obs, [1.0, -0.5, 0.25, 0.75]);
-    assert_eq!((ball.obs_dim(), ball.action_dim(), ball.action_bound()), (4, 2, 1.0));
+    assert_eq!(
+        (ball.obs_dim(), ball.action_dim(), ball.action_bound()),
+        (4, 2, 1.0)
+    );
     assert_eq!(ball.torso_z(), None);
     assert!((ball.control_dt_secs() - 0.2).abs() < 1e-9);
 }
@@ -119,11 +149,26 @@ fn full_force_crosses_a_four_metre_cell_in_five_to_ten_control_steps() {
 fn invalid_point_params_are_rejected() {
     let walls = Maze::new(MazeLayout::U).walls();
     let bad = [
-        PointParams { n_substeps: 0, ..PointParams::default() },
-        PointParams { mass_kg: 0.0, ..PointParams::default() },
-        PointParams { radius_m: 0.01, ..PointParams::default() },
-        PointParams { damping_n_s_per_m: 100.0, ..PointParams::default() },
-        PointParams { reset_noise_m: f32::NAN, ..PointParams::default() },
+        PointParams {
+            n_substeps: 0,
+            ..PointParams::default()
+        },
+        PointParams {
+            mass_kg: 0.0,
+            ..PointParams::default()
+        },
+        PointParams {
+            radius_m: 0.01,
+            ..PointParams::default()
+        },
+        PointParams {
+            damping_n_s_per_m: 100.0,
+            ..PointParams::default()
+        },
+        PointParams {
+            reset_noise_m: f32::NAN,
+            ..PointParams::default()
+        },
     ];
     for params in bad {
         assert!(PointMass::new(params, &walls).is_err(), "{params:?}");

@@ -11,13 +11,21 @@ use envs::registry::{make, parse_task, task_name, task_names, RobotKind, Task, T
 fn every_maze_task_is_registered_once_for_both_robots_and_variants() {
     let names = task_names();
     assert_eq!(names.len(), 16);
-    assert_eq!(names.iter().collect::<HashSet<_>>().len(), names.len(), "names are unique");
+    assert_eq!(
+        names.iter().collect::<HashSet<_>>().len(),
+        names.len(),
+        "names are unique"
+    );
     let tasks: HashSet<Task> = TASKS.iter().map(|(_, t)| *t).collect();
     assert_eq!(tasks.len(), names.len(), "tasks are unique");
     for robot in [RobotKind::Ant, RobotKind::Point] {
         for layout in MazeLayout::ALL {
             for variant in [Variant::Train, Variant::Test] {
-                assert!(tasks.contains(&Task::Maze(TaskId { robot, layout, variant })));
+                assert!(tasks.contains(&Task::Maze(TaskId {
+                    robot,
+                    layout,
+                    variant
+                })));
             }
         }
     }
@@ -27,14 +35,41 @@ fn every_maze_task_is_registered_once_for_both_robots_and_variants() {
 fn names_parse_to_the_expected_tasks_and_back() {
     let cases = [
         ("antmaze-u", RobotKind::Ant, MazeLayout::U, Variant::Train),
-        ("antmaze-w-test", RobotKind::Ant, MazeLayout::W, Variant::Test),
-        ("ant-fourrooms-test", RobotKind::Ant, MazeLayout::FourRooms, Variant::Test),
-        ("pointmaze-s", RobotKind::Point, MazeLayout::S, Variant::Train),
-        ("pointmaze-fourrooms", RobotKind::Point, MazeLayout::FourRooms, Variant::Train),
+        (
+            "antmaze-w-test",
+            RobotKind::Ant,
+            MazeLayout::W,
+            Variant::Test,
+        ),
+        (
+            "ant-fourrooms-test",
+            RobotKind::Ant,
+            MazeLayout::FourRooms,
+            Variant::Test,
+        ),
+        (
+            "pointmaze-s",
+            RobotKind::Point,
+            MazeLayout::S,
+            Variant::Train,
+        ),
+        (
+            "pointmaze-fourrooms",
+            RobotKind::Point,
+            MazeLayout::FourRooms,
+            Variant::Train,
+        ),
     ];
     for (name, robot, layout, variant) in cases {
         let task = parse_task(name).expect("registered");
-        assert_eq!(task, Task::Maze(TaskId { robot, layout, variant }));
+        assert_eq!(
+            task,
+            Task::Maze(TaskId {
+                robot,
+                layout,
+                variant
+            })
+        );
         assert_eq!(task_name(task), name);
     }
 }
@@ -66,8 +101,18 @@ fn point_maze_tasks_have_the_expected_specs() {
         let spec = env.spec().clone();
         assert_eq!(spec.name, name);
         assert_eq!((spec.obs_dim, spec.action_dim, spec.goal_dim), (4, 2, 2));
-        assert_eq!((spec.action_low, spec.action_high), (vec![-1.0; 2], vec![1.0; 2]));
-        assert_eq!((spec.max_steps, spec.terminate_on_success, spec.success_threshold), (max_steps, terminate, 1.5));
+        assert_eq!(
+            (spec.action_low, spec.action_high),
+            (vec![-1.0; 2], vec![1.0; 2])
+        );
+        assert_eq!(
+            (
+                spec.max_steps,
+                spec.terminate_on_success,
+                spec.success_threshold
+            ),
+            (max_steps, terminate, 1.5)
+        );
         let reset = env.reset(3);
         if let Some(goal) = test_goal {
             assert_eq!(reset.goal, goal);
@@ -88,5 +133,9 @@ fn ant_maze_tasks_have_the_ants_dimensions_and_step() {
     assert_eq!(reset.goal, [0.0, 8.0]);
     let step = env.step(&[0.0; 8]).expect("valid action");
     assert!(step.obs.iter().all(|v| v.is_finite()));
-    assert_eq!((step.reward, step.info.fell), (-1.0, false), "a resting ant far from the goal, upright");
+    assert_eq!(
+        (step.reward, step.info.fell),
+        (-1.0, false),
+        "a resting ant far from the goal, upright"
+    );
 }

@@ -22,7 +22,11 @@ fn rendering_a_maze_with_a_trajectory_writes_a_png() {
         render_maze_png(&maze, &trajectory, maze.test_goal(), &path).expect("rendered");
         let bytes = std::fs::read(&path).expect("written");
         assert_eq!(bytes[..8], PNG_SIGNATURE, "{layout:?}");
-        assert_eq!(png_size(&bytes), (IMAGE_SIDE_PX, IMAGE_SIDE_PX), "{layout:?}: square mazes give square images");
+        assert_eq!(
+            png_size(&bytes),
+            (IMAGE_SIDE_PX, IMAGE_SIDE_PX),
+            "{layout:?}: square mazes give square images"
+        );
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
@@ -30,6 +34,9 @@ fn rendering_a_maze_with_a_trajectory_writes_a_png() {
 #[test]
 fn rendering_into_a_missing_directory_is_an_error() {
     let maze = Maze::new(MazeLayout::U);
-    let path = std::env::temp_dir().join("envs-render-no-such-dir").join("x").join("maze.png");
+    let path = std::env::temp_dir()
+        .join("envs-render-no-such-dir")
+        .join("x")
+        .join("maze.png");
     assert!(render_maze_png(&maze, &[], maze.test_goal(), &path).is_err());
 }
