@@ -446,13 +446,15 @@ impl CheetahSim {
         mb.damping_mut().fill(0.0);
         mb.armature_mut().fill(0.0);
         mb.set_self_contacts_enabled(false);
-        for (leg, &link_id) in params.legs().into_iter().zip(&link_ids[1..]) {
+        for (i, (leg, &link_id)) in params.legs().into_iter().zip(&link_ids[1..]).enumerate() {
             let link = mb
                 .link_mut(link_id)
                 .expect("invariant: link id comes from the joint set");
             link.joint
                 .set_spring(ANG_Y_AXIS, leg.stiffness_nm_per_rad, 0.0);
             let dof = link.assembly_id();
+            // Links were appended in qpos order, so generalized vectors are MuJoCo's qpos/qvel.
+            debug_assert_eq!(dof, 3 + i, "generalized coordinates out of qpos order");
             mb.damping_mut()[dof] = leg.damping_nms_per_rad;
             mb.armature_mut()[dof] = params.armature_kg_m2;
         }

@@ -303,3 +303,26 @@ fn invalid_params_are_reported_together() {
         other => panic!("expected InvalidParam, got {:?}", other.err()),
     }
 }
+
+#[test]
+fn positive_action_turns_each_joint_positively() {
+    let after = |sign: f32| {
+        let mut env = train_env();
+        env.reset(0);
+        env.set_state([0.0; N_QPOS], [0.0; N_QPOS])
+            .expect("finite state");
+        for _ in 0..2 {
+            env.step(&[sign; N_ACTION]).expect("valid");
+        }
+        env.state().0
+    };
+    let (plus, minus) = (after(1.0), after(-1.0));
+    for j in 3..N_QPOS {
+        assert!(
+            plus[j] > minus[j] + 0.05,
+            "joint {j}: {} vs {}",
+            plus[j],
+            minus[j]
+        );
+    }
+}
