@@ -122,7 +122,7 @@ impl TryFrom<u32> for GraphStatus {
 
 /// Request user header.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[type_name("asi::GraphRequestHeader")]
 pub struct GraphRequestHeader {
     /// Client-chosen id, echoed in the response.
@@ -161,7 +161,7 @@ impl Versioned for GraphRequestHeader {
 
 /// Response user header.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[type_name("asi::GraphResponseHeader")]
 pub struct GraphResponseHeader {
     /// The request's id.

@@ -26,7 +26,8 @@ pub use error::ProtocolError;
 pub use graph::{decode, encode, GraphRequest, GraphResponse, LatentPoint};
 pub use payload::{
     check_version, ActorId, ControlCommand, ControlMessage, EpisodeId, MetricsSample, PhiVersion,
-    PolicyVersion, ProcessRole, TrajectoryFlags, TrajectoryHeader, Versioned, WeightsHeader,
+    PolicyVersion, ProcessRole, ProgressMessage, TrajectoryFlags, TrajectoryHeader, Versioned,
+    WeightsHeader,
 };
 pub use services::{RunId, RunIdError, Service};
 pub use step::{DecisionKind, StepLayout, StepRecord, StepView};

@@ -135,7 +135,7 @@ impl TrajectoryFlags {
 /// User header of a trajectory chunk (`asi/<run>/trajectories`, payload `[f32]` of
 /// `n_steps × record_len` floats laid out as in [`crate::step`]).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[type_name("asi::TrajectoryHeader")]
 pub struct TrajectoryHeader {
     /// The episode this chunk belongs to.
@@ -232,7 +232,7 @@ impl Versioned for TrajectoryHeader {
 /// User header of a weights message (`asi/<run>/weights`, payload `[u8]` safetensors bytes of
 /// the policy and φ networks, history 1).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[type_name("asi::WeightsHeader")]
 pub struct WeightsHeader {
     /// Version of the policy tensors in the payload.
@@ -481,6 +481,39 @@ impl ControlMessage {
 }
 
 impl Versioned for ControlMessage {
+    fn protocol_version(&self) -> u32 {
+        self.protocol_version
+    }
+}
+
+/// Learner → actors (`asi/<run>/progress`, history 1): the state of the replay-ratio throttle
+/// (SPEC §6.8). Actors pause while `env_steps_ingested >= env_step_budget`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("asi::ProgressMessage")]
+pub struct ProgressMessage {
+    /// Env steps the learner has stored so far, over all actors.
+    pub env_steps_ingested: u64,
+    /// Env steps the learner accepts before actors must wait (consumed by updates + slack).
+    pub env_step_budget: u64,
+    /// Latest published policy version.
+    pub policy_version: PolicyVersion,
+    /// Latest published φ version.
+    pub phi_version: PhiVersion,
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub protocol_version: u32,
+    /// Zero; keeps the struct free of implicit padding.
+    pub reserved: u32,
+}
+
+impl ProgressMessage {
+    /// Whether actors may produce more env steps now.
+    pub fn allows_more(&self) -> bool {
+        self.env_steps_ingested < self.env_step_budget
+    }
+}
+
+impl Versioned for ProgressMessage {
     fn protocol_version(&self) -> u32 {
         self.protocol_version
     }

@@ -147,16 +147,19 @@ pub enum Service {
     Metrics,
     /// Launcher → all: stop, checkpoint.
     Control,
+    /// Learner → actors: replay-ratio throttle state ([`crate::payload::ProgressMessage`], history 1).
+    Progress,
 }
 
 impl Service {
     /// Every service, in a fixed order (useful for cleanup and listings).
-    pub const ALL: [Service; 5] = [
+    pub const ALL: [Service; 6] = [
         Service::Trajectories,
         Service::Weights,
         Service::Graph,
         Service::Metrics,
         Service::Control,
+        Service::Progress,
     ];
 
     /// The last component of the service name.
@@ -167,6 +170,7 @@ impl Service {
             Service::Graph => "graph",
             Service::Metrics => "metrics",
             Service::Control => "control",
+            Service::Progress => "progress",
         }
     }
 }

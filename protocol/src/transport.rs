@@ -20,6 +20,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 
 /// The service variant of every channel: inter-process shared memory.
@@ -180,6 +181,15 @@ where
         self.notifier.notify().map_err(|e| send_err(&e))?;
         Ok(delivered)
     }
+
+    /// Connects subscribers that appeared since the last send and hands them the history
+    /// (e.g. the latest weights to a restarted actor). Call it on a timer.
+    pub fn update_connections(&self) -> Result<(), TransportError> {
+        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
+        self.publisher.update_connections().map_err(|e| send_err(&e))?;
+        self.notifier.notify().map_err(|e| send_err(&e))?;
+        Ok(())
+    }
 }
 
 /// Receiving end of a channel; its listener can be attached to a [`WaitSet`].
@@ -241,5 +251,261 @@ where
         let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
         self.listener.timed_wait(|_| {}, timeout).map_err(|e| recv_err(&e))?;
         self.drain(on_sample)
+    }
+}
+
+/// Sending end of a fixed-size message channel (metrics, control, progress).
+pub struct ValuePublisher<T: Debug + Copy + ZeroCopySend + 'static> {
+    name: String,
+    publisher: Publisher<Ipc, T, ()>,
+    notifier: Notifier<Ipc>,
+}
+
+fn open_value_services<T: Debug + Copy + ZeroCopySend + 'static>(
+    node: &Node<Ipc>,
+    name: &str,
+    shape: &ChannelShape,
+) -> Result<(iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>, EventService), TransportError>
+{
+    let sn = service_name(name)?;
+    let open_err = |e: &dyn Debug| TransportError::Open { service: name.to_owned(), reason: format!("{e:?}") };
+    let data = node
+        .service_builder(&sn)
+        .publish_subscribe::<T>()
+        .history_size(shape.history)
+        .subscriber_max_buffer_size(shape.subscriber_buffer.max(shape.history))
+        .max_publishers(shape.max_publishers)
+        .max_subscribers(shape.max_subscribers)
+        .open_or_create()
+        .map_err(|e| open_err(&e))?;
+    let events = node
+        .service_builder(&sn)
+        .event()
+        .max_notifiers(shape.max_publishers + 1)
+        .max_listeners(shape.max_subscribers + 1)
+        .open_or_create()
+        .map_err(|e| open_err(&e))?;
+    Ok((data, events))
+}
+
+impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
+    pub fn open(node: &Node<Ipc>, name: &str, shape: &ChannelShape) -> Result<Self, TransportError> {
+        let (data, events) = open_value_services::<T>(node, name, shape)?;
+        let port_err =
+            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let publisher = data
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(|e| port_err("publisher", &e))?;
+        let notifier = events.notifier_builder().create().map_err(|e| port_err("notifier", &e))?;
+        Ok(Self { name: name.to_owned(), publisher, notifier })
+    }
+
+    /// Sends a copy of `value` and wakes the subscribers; a full subscriber misses it.
+    pub fn send(&self, value: T) -> Result<usize, TransportError> {
+        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
+        let delivered = self.publisher.send_copy(value).map_err(|e| send_err(&e))?;
+        self.notifier.notify().map_err(|e| send_err(&e))?;
+        Ok(delivered)
+    }
+
+    /// Connects new subscribers and hands them the history; call it on a timer.
+    pub fn update_connections(&self) -> Result<(), TransportError> {
+        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
+        self.publisher.update_connections().map_err(|e| send_err(&e))?;
+        self.notifier.notify().map_err(|e| send_err(&e))?;
+        Ok(())
+    }
+}
+
+/// Receiving end of a fixed-size message channel.
+pub struct ValueSubscriber<T: Debug + Copy + ZeroCopySend + 'static> {
+    name: String,
+    subscriber: Subscriber<Ipc, T, ()>,
+    listener: Listener<Ipc>,
+}
+
+impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
+    pub fn open(node: &Node<Ipc>, name: &str, shape: &ChannelShape) -> Result<Self, TransportError> {
+        let (data, events) = open_value_services::<T>(node, name, shape)?;
+        let port_err =
+            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let subscriber = data
+            .subscriber_builder()
+            .buffer_size(shape.subscriber_buffer.max(shape.history))
+            .create()
+            .map_err(|e| port_err("subscriber", &e))?;
+        let listener = events.listener_builder().create().map_err(|e| port_err("listener", &e))?;
+        Ok(Self { name: name.to_owned(), subscriber, listener })
+    }
+
+    /// The event listener to attach to a [`WaitSet`].
+    pub fn listener(&self) -> &Listener<Ipc> {
+        &self.listener
+    }
+
+    /// Clears pending wake-ups and returns every available message in arrival order.
+    pub fn drain(&self) -> Result<Vec<T>, TransportError> {
+        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
+        self.listener.try_wait(|_| {}).map_err(|e| recv_err(&e))?;
+        let mut values = Vec::new();
+        while let Some(sample) = self.subscriber.receive().map_err(|e| recv_err(&e))? {
+            values.push(*sample.payload());
+        }
+        Ok(values)
+    }
+
+    /// Blocks up to `timeout` for a wake-up, then drains.
+    pub fn wait_and_drain(&self, timeout: Duration) -> Result<Vec<T>, TransportError> {
+        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
+        self.listener.timed_wait(|_| {}, timeout).map_err(|e| recv_err(&e))?;
+        self.drain()
+    }
+}
+
+type RpcService<Q, R> =
+    iceoryx2::service::port_factory::request_response::PortFactory<Ipc, [u8], Q, [u8], R>;
+
+/// Opens the request–response service and its two wake-up events (`…/requests`, `…/responses`).
+fn open_rpc_services<Q, R>(
+    node: &Node<Ipc>,
+    name: &str,
+    max_clients: usize,
+) -> Result<(RpcService<Q, R>, EventService, EventService), TransportError>
+where
+    Q: Debug + Default + Copy + ZeroCopySend + 'static,
+    R: Debug + Default + Copy + ZeroCopySend + 'static,
+{
+    let open_err = |e: &dyn Debug| TransportError::Open { service: name.to_owned(), reason: format!("{e:?}") };
+    let rpc = node
+        .service_builder(&service_name(name)?)
+        .request_response::<[u8], [u8]>()
+        .request_user_header::<Q>()
+        .response_user_header::<R>()
+        .max_clients(max_clients)
+        .max_servers(1)
+        .open_or_create()
+        .map_err(|e| open_err(&e))?;
+    let event = |suffix: &str| {
+        node.service_builder(&service_name(&format!("{name}/{suffix}"))?)
+            .event()
+            .max_notifiers(max_clients + 1)
+            .max_listeners(max_clients + 1)
+            .open_or_create()
+            .map_err(|e| open_err(&e))
+    };
+    Ok((rpc, event("requests")?, event("responses")?))
+}
+
+/// The answering side of a request–response channel whose bodies are bytes (postcard).
+pub struct RpcServer<Q, R>
+where
+    Q: Debug + Default + Copy + ZeroCopySend + 'static,
+    R: Debug + Default + Copy + ZeroCopySend + 'static,
+{
+    name: String,
+    server: iceoryx2::port::server::Server<Ipc, [u8], Q, [u8], R>,
+    listener: Listener<Ipc>,
+    notifier: Notifier<Ipc>,
+}
+
+impl<Q, R> RpcServer<Q, R>
+where
+    Q: Debug + Default + Copy + ZeroCopySend + 'static,
+    R: Debug + Default + Copy + ZeroCopySend + 'static,
+{
+    pub fn open(node: &Node<Ipc>, name: &str, max_clients: usize, max_len: usize) -> Result<Self, TransportError> {
+        let (rpc, requests, responses) = open_rpc_services::<Q, R>(node, name, max_clients)?;
+        let port_err =
+            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let server = rpc
+            .server_builder()
+            .initial_max_slice_len(max_len)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| port_err("server", &e))?;
+        let listener = requests.listener_builder().create().map_err(|e| port_err("listener", &e))?;
+        let notifier = responses.notifier_builder().create().map_err(|e| port_err("notifier", &e))?;
+        Ok(Self { name: name.to_owned(), server, listener, notifier })
+    }
+
+    /// The request wake-up listener to attach to a [`WaitSet`].
+    pub fn listener(&self) -> &Listener<Ipc> {
+        &self.listener
+    }
+
+    /// Answers every pending request with `handler(header, body) -> (header, body)`, then wakes
+    /// the clients once. Returns how many requests were answered.
+    pub fn serve(&self, mut handler: impl FnMut(&Q, &[u8]) -> (R, Vec<u8>)) -> Result<usize, TransportError> {
+        let err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
+        self.listener.try_wait(|_| {}).map_err(|e| err(&e))?;
+        let mut n = 0;
+        while let Some(request) = self.server.receive().map_err(|e| err(&e))? {
+            let (header, body) = handler(request.user_header(), request.payload());
+            let mut response = request.loan_slice_uninit(body.len()).map_err(|e| err(&e))?;
+            *response.user_header_mut() = header;
+            response.write_from_slice(&body).send().map_err(|e| err(&e))?;
+            n += 1;
+        }
+        if n > 0 {
+            self.notifier.notify().map_err(|e| err(&e))?;
+        }
+        Ok(n)
+    }
+}
+
+/// The asking side of a request–response channel.
+pub struct RpcClient<Q, R>
+where
+    Q: Debug + Default + Copy + ZeroCopySend + 'static,
+    R: Debug + Default + Copy + ZeroCopySend + 'static,
+{
+    name: String,
+    client: iceoryx2::port::client::Client<Ipc, [u8], Q, [u8], R>,
+    notifier: Notifier<Ipc>,
+    listener: Listener<Ipc>,
+}
+
+impl<Q, R> RpcClient<Q, R>
+where
+    Q: Debug + Default + Copy + ZeroCopySend + 'static,
+    R: Debug + Default + Copy + ZeroCopySend + 'static,
+{
+    pub fn open(node: &Node<Ipc>, name: &str, max_clients: usize, max_len: usize) -> Result<Self, TransportError> {
+        let (rpc, requests, responses) = open_rpc_services::<Q, R>(node, name, max_clients)?;
+        let port_err =
+            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let client = rpc
+            .client_builder()
+            .initial_max_slice_len(max_len)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| port_err("client", &e))?;
+        let notifier = requests.notifier_builder().create().map_err(|e| port_err("notifier", &e))?;
+        let listener = responses.listener_builder().create().map_err(|e| port_err("listener", &e))?;
+        Ok(Self { name: name.to_owned(), client, notifier, listener })
+    }
+
+    /// Sends one request and waits up to `timeout` for its response. A server that does not
+    /// answer in time is a [`TransportError::Receive`] naming the timeout.
+    pub fn call(&self, header: Q, body: &[u8], timeout: Duration) -> Result<(R, Vec<u8>), TransportError> {
+        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
+        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
+        let mut request = self.client.loan_slice_uninit(body.len()).map_err(|e| send_err(&e))?;
+        *request.user_header_mut() = header;
+        let pending = request.write_from_slice(body).send().map_err(|e| send_err(&e))?;
+        self.notifier.notify().map_err(|e| send_err(&e))?;
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            if let Some(response) = pending.receive().map_err(|e| recv_err(&e))? {
+                return Ok((*response.user_header(), response.payload().to_vec()));
+            }
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Err(recv_err(&format!("no response within {timeout:?}")));
+            }
+            self.listener.timed_wait(|_| {}, left).map_err(|e| recv_err(&e))?;
+        }
     }
 }

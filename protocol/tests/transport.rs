@@ -66,3 +66,53 @@ fn a_full_subscriber_never_blocks_a_discarding_publisher() {
         publisher.send(TestHeader { chunk, n: 1 }, &[1.0]).unwrap();
     }
 }
+
+#[test]
+fn fixed_size_values_arrive_and_history_reaches_a_late_subscriber() {
+    use ::protocol::transport::{ValuePublisher, ValueSubscriber};
+    let service = unique("values");
+    let node = open_node("test-values").unwrap();
+    let shape = ChannelShape { history: 1, ..SHAPE };
+    let publisher = ValuePublisher::<TestHeader>::open(&node, &service, &shape).unwrap();
+    publisher.send(TestHeader { chunk: 7, n: 1 }).unwrap();
+    let late = ValueSubscriber::<TestHeader>::open(&node, &service, &shape).unwrap();
+    publisher.update_connections().unwrap();
+    let values = late.drain().unwrap();
+    assert_eq!(values, vec![TestHeader { chunk: 7, n: 1 }]);
+}
+
+#[test]
+fn a_request_gets_its_own_response_across_nodes() {
+    use ::protocol::transport::{RpcClient, RpcServer};
+    let service = unique("rpc");
+    let server_node = open_node("test-server").unwrap();
+    let server = RpcServer::<TestHeader, TestHeader>::open(&server_node, &service, 4, 64).unwrap();
+    // iceoryx2 ipc ports are not Send: the client lives entirely on its own thread.
+    let client_service = service.clone();
+    let call = std::thread::spawn(move || {
+        let client_node = open_node("test-client").unwrap();
+        let client = RpcClient::<TestHeader, TestHeader>::open(&client_node, &client_service, 4, 64).unwrap();
+        client.call(TestHeader { chunk: 3, n: 2 }, &[1, 2], Duration::from_secs(5))
+    });
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    let mut served = 0;
+    while served == 0 && std::time::Instant::now() < deadline {
+        served = server
+            .serve(|h, body| (TestHeader { chunk: h.chunk * 10, n: body.len() as u32 }, body.iter().rev().copied().collect()))
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let (header, body) = call.join().unwrap().unwrap();
+    assert_eq!(header, TestHeader { chunk: 30, n: 2 });
+    assert_eq!(body, vec![2, 1]);
+}
+
+#[test]
+fn a_call_without_a_server_times_out_with_an_error() {
+    use ::protocol::transport::RpcClient;
+    let service = unique("no-server");
+    let node = open_node("test-lonely").unwrap();
+    let client = RpcClient::<TestHeader, TestHeader>::open(&node, &service, 4, 64).unwrap();
+    let err = client.call(TestHeader::default(), &[0], Duration::from_millis(50)).unwrap_err();
+    assert!(err.to_string().contains("no response"), "{err}");
+}
