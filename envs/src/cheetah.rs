@@ -11,6 +11,13 @@
 //! `damping` and `armature`; motor torques `gear × action` act equal and opposite on the two
 //! bodies of a joint, which is exactly a generalized force on that joint.
 //!
+//! Checked against MuJoCo 3.3.7 on the same model (gym contact parameters): total mass 14 kg
+//! with the same per-body split; at rest (zero action, 3 s) rapier gives rootz −0.104,
+//! rooty 0.037 versus MuJoCo's −0.132, 0.052, and MuJoCo with hard contacts gives −0.109, 0.041
+//! with joint angles within 0.02 rad of ours, so the remaining gap is MuJoCo's soft contact.
+//! Joint limits engage once a joint is past them in both engines; under bang-bang actions
+//! rapier overshoots by at most ~0.13 rad, MuJoCo (soft limits) by ~0.2 rad.
+//!
 //! Invariants:
 //! - Every `reset` (and `set_state`) builds a fresh rapier world, so the same seed gives the
 //!   same trajectory whatever happened before.
