@@ -8,6 +8,7 @@
 
 use crate::ant::{Ant, AntParams};
 use crate::api::{Env, EnvError};
+use crate::cheetah::{CheetahHurdle, CheetahParams};
 use crate::maze::{Maze, MazeLayout};
 use crate::maze_env::{MazeEnv, MazeTaskParams, Variant};
 use crate::point::{PointMass, PointParams};
@@ -34,6 +35,8 @@ pub struct TaskId {
 pub enum Task {
     /// A robot in one of the mazes.
     Maze(TaskId),
+    /// HalfCheetahHurdle (no maze); the test variant ends on success.
+    HalfCheetahHurdle(Variant),
 }
 
 const fn maze(robot: RobotKind, layout: MazeLayout, variant: Variant) -> Task {
@@ -66,6 +69,8 @@ pub const TASKS: &[(&str, Task)] = &[
     ("pointmaze-w-test", maze(P, W, Test)),
     ("pointmaze-fourrooms", maze(P, FourRooms, Train)),
     ("pointmaze-fourrooms-test", maze(P, FourRooms, Test)),
+    ("halfcheetah-hurdle", Task::HalfCheetahHurdle(Train)),
+    ("halfcheetah-hurdle-test", Task::HalfCheetahHurdle(Test)),
 ];
 
 /// All registered task names, in table order.
@@ -96,8 +101,31 @@ pub fn task_name(task: Task) -> &'static str {
 
 /// Builds a task by name with default parameters.
 pub fn make(name: &str) -> Result<Box<dyn Env>, EnvError> {
+    make_with(name, EnvOptions::default())
+}
+
+/// Run-level choices that apply to every task.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EnvOptions {
+    /// Episode length override in control steps (e.g. short episodes for smoke tests); `None`
+    /// keeps the task's own length (maze: 500 or 1000; cheetah: 1000).
+    pub max_steps: Option<u32>,
+}
+
+/// Builds a task by name with default parameters and run-level options.
+pub fn make_with(name: &str, options: EnvOptions) -> Result<Box<dyn Env>, EnvError> {
     match parse_task(name)? {
-        Task::Maze(id) => make_maze(id, &MazeRobotParams::default(), MazeTaskParams::default()),
+        Task::Maze(id) => {
+            let task = MazeTaskParams { max_steps: options.max_steps, ..MazeTaskParams::default() };
+            make_maze(id, &MazeRobotParams::default(), task)
+        }
+        Task::HalfCheetahHurdle(variant) => {
+            let mut params = CheetahParams::default();
+            if let Some(max_steps) = options.max_steps {
+                params.max_steps = max_steps;
+            }
+            Ok(Box::new(CheetahHurdle::new(params, variant == Variant::Test)?))
+        }
     }
 }
 
