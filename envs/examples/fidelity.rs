@@ -1,7 +1,9 @@
 //! Ant fidelity protocol, rapier side. Prints one JSON object to compare with
 //! `scripts/fidelity/mujoco_fidelity.py`, which runs the same protocol in MuJoCo.
 //!
-//! Run: `cargo run --release -p envs --example fidelity [-- [--episodes N] [key=value ...]]`.
+//! Run: `cargo run --release -p envs --example fidelity [-- [--episodes N] [--trace-gait]
+//! [key=value ...]]`. `--trace-gait` also prints the gait's per-step torso pose and hinge
+//! angles to stderr.
 //! `key=value` overrides one Ant parameter for tuning experiments, e.g. `solver.substeps=4`
 //! (see [`apply_override`] for the keys). Without arguments it runs the full protocol with the
 //! default parameters.
@@ -17,6 +19,12 @@
 //!    the fraction of episodes with torso z < 0.3 at the end of any control step.
 //! 3. limit: from qpos0, 50 control steps with +16 on hip_1 (then on ankle_1) and 0 elsewhere;
 //!    reports that hinge's angle (deg) averaged over the last 10 control steps.
+//! 4. gait_ensemble (rapier-side addition): the gait is chaotic — in MuJoCo a 1e-6 change of
+//!    the start changes its final yaw by tens of degrees — so test 1 alone compares one sample
+//!    of a chaotic map. This repeats it from qpos0 + 0.01 (2u − 1) on all 15 entries
+//!    (SplitMix64(s), s = 0..49, quaternion normalised) and reports the mean and std of |dxy|,
+//!    the mean dy and the mean |yaw|.
+//!
 //! Timing: control steps per second over 2000 control steps of random actions (SplitMix64
 //!    seed 12345, drawn before the clock starts), single thread, median of 5 runs.
 
@@ -36,6 +44,9 @@ const FLIP_Z_M: f32 = 0.3;
 /// Limit test length and the tail averaged.
 const LIMIT_STEPS: usize = 50;
 const LIMIT_TAIL: usize = 10;
+/// Gait ensemble: number of perturbed starts and the perturbation half-width.
+const GAIT_ENSEMBLE_N: u64 = 50;
+const GAIT_ENSEMBLE_PERTURBATION: f64 = 0.01;
 /// Timing run.
 const TIMING_STEPS: usize = 2000;
 const TIMING_REPEATS: usize = 5;
@@ -70,37 +81,54 @@ impl SplitMix64 {
 }
 
 fn main() -> Result<(), EnvError> {
-    let (params, episodes) = parse_args()?;
+    let args = parse_args()?;
+    let params = args.params;
     let mass = Ant::new(params.clone(), &[])?.total_mass();
-    let gait = gait(&params)?;
-    let random = random(&params, episodes)?;
+    let gait = gait(&params, args.trace_gait)?;
+    let gait_ensemble = gait_ensemble(&params)?;
+    let random = random(&params, args.episodes)?;
     let hip1 = hold(&params, ACTUATOR_HIP_1, QPOS_HIP_1)?;
     let ankle1 = hold(&params, ACTUATOR_ANKLE_1, QPOS_ANKLE_1)?;
     let rate = steps_per_sec(&params)?;
     println!(
-        "{{\"engine\":\"rapier\",\"mass\":{mass},\"gait\":{gait},\"random\":{random},\
+        "{{\"engine\":\"rapier\",\"mass\":{mass},\"gait\":{gait},\"gait_ensemble\":{gait_ensemble},\"random\":{random},\
          \"limit\":{{\"hip1_deg\":{hip1},\"ankle1_deg\":{ankle1}}},\"steps_per_sec\":{rate}}}"
     );
     Ok(())
 }
 
-/// Reads `--episodes N` and `key=value` overrides.
-fn parse_args() -> Result<(AntParams, u64), EnvError> {
-    let mut params = AntParams::default();
-    let mut episodes = RANDOM_EPISODES;
+/// Command line: parameters with overrides, random-test size, gait tracing.
+struct Args {
+    params: AntParams,
+    episodes: u64,
+    trace_gait: bool,
+}
+
+/// Reads `--episodes N`, `--trace-gait` and `key=value` overrides.
+fn parse_args() -> Result<Args, EnvError> {
+    let mut parsed = Args {
+        params: AntParams::default(),
+        episodes: RANDOM_EPISODES,
+        trace_gait: false,
+    };
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         if arg == "--episodes" {
             let value = args.next().unwrap_or_default();
-            episodes = value.parse().map_err(|_| bad_arg("--episodes", &value))?;
+            parsed.episodes = value.parse().map_err(|_| bad_arg("--episodes", &value))?;
+        } else if arg == "--trace-gait" {
+            parsed.trace_gait = true;
         } else if let Some((key, value)) = arg.split_once('=') {
-            apply_override(&mut params, key, value)?;
+            apply_override(&mut parsed.params, key, value)?;
         } else {
             return Err(bad_arg(&arg, ""));
         }
     }
-    params.validate()?;
-    Ok((params, episodes))
+    if parsed.episodes == 0 {
+        return Err(bad_arg("--episodes", "0"));
+    }
+    parsed.params.validate()?;
+    Ok(parsed)
 }
 
 /// Sets one tunable parameter from text.
@@ -139,9 +167,45 @@ fn ant_at_rest(params: &AntParams) -> Result<Ant, EnvError> {
     Ant::new(params.clone(), &[])
 }
 
-/// Test 1: the fixed sinusoidal gait.
-fn gait(params: &AntParams) -> Result<String, EnvError> {
+/// Test 1: the fixed sinusoidal gait from qpos0.
+fn gait(params: &AntParams, trace: bool) -> Result<String, EnvError> {
     let mut ant = ant_at_rest(params)?;
+    let (dx, dy, qpos) = run_gait(&mut ant, params, trace);
+    Ok(format!(
+        "{{\"dx\":{dx},\"dy\":{dy},\"dist\":{},\"yaw_deg\":{},\"z\":{}}}",
+        dx.hypot(dy),
+        yaw_deg(&qpos),
+        qpos[2]
+    ))
+}
+
+/// Test 4: the gait from slightly perturbed starts.
+fn gait_ensemble(params: &AntParams) -> Result<String, EnvError> {
+    let mut ant = ant_at_rest(params)?;
+    let mut distances = Vec::new();
+    let (mut dy_sum, mut abs_yaw_sum) = (0.0, 0.0);
+    for seed in 0..GAIT_ENSEMBLE_N {
+        let qpos = noisy_qpos0(params, &mut SplitMix64(seed), GAIT_ENSEMBLE_PERTURBATION);
+        ant.rebuild();
+        ant.set_state(&qpos, &[0.0; QVEL_DIM]);
+        let (dx, dy, final_qpos) = run_gait(&mut ant, params, false);
+        distances.push(dx.hypot(dy));
+        dy_sum += dy;
+        abs_yaw_sum += yaw_deg(&final_qpos).abs();
+    }
+    let n = GAIT_ENSEMBLE_N as f64;
+    let stats = Stats::of(&mut distances);
+    Ok(format!(
+        "{{\"dist_mean\":{},\"dist_std\":{},\"dy_mean\":{},\"abs_yaw_mean\":{}}}",
+        stats.mean,
+        stats.std,
+        dy_sum / n,
+        abs_yaw_sum / n
+    ))
+}
+
+/// Runs the gait from the ant's current state; returns (dx, dy, final qpos).
+fn run_gait(ant: &mut Ant, params: &AntParams, trace: bool) -> (f64, f64, [f32; QPOS_DIM]) {
     let [x0, y0] = ant.xy();
     let phases = [0.0, std::f64::consts::PI, 0.0, std::f64::consts::PI];
     for t in 0..GAIT_STEPS {
@@ -153,15 +217,38 @@ fn gait(params: &AntParams) -> Result<String, EnvError> {
             joint_torques[2 * leg + 1] = (f64::from(params.ctrl_range) * angle.cos()) as f32;
         }
         ant.step(&to_actuator_order(&joint_torques));
+        if trace {
+            trace_line(t, &ant.qpos());
+        }
     }
     let qpos = ant.qpos();
-    let (dx, dy) = (f64::from(qpos[0] - x0), f64::from(qpos[1] - y0));
-    Ok(format!(
-        "{{\"dx\":{dx},\"dy\":{dy},\"dist\":{},\"yaw_deg\":{},\"z\":{}}}",
-        dx.hypot(dy),
-        yaw_deg(&qpos),
-        qpos[2]
-    ))
+    (f64::from(qpos[0] - x0), f64::from(qpos[1] - y0), qpos)
+}
+
+/// qpos0 plus U(−half_width, half_width) on all 15 entries, quaternion left for `set_state`
+/// to normalise.
+fn noisy_qpos0(params: &AntParams, rng: &mut SplitMix64, half_width: f64) -> [f32; QPOS_DIM] {
+    let mut qpos = params.qpos0();
+    for value in qpos.iter_mut() {
+        *value = (f64::from(*value) + rng.symmetric(half_width)) as f32;
+    }
+    qpos
+}
+
+/// One stderr line: step, torso xyz, yaw and hinge angles (deg).
+fn trace_line(step: usize, qpos: &[f32; QPOS_DIM]) {
+    let hinges: Vec<String> = qpos[7..]
+        .iter()
+        .map(|q| format!("{:6.1}", q.to_degrees()))
+        .collect();
+    eprintln!(
+        "{step:3} {:7.3} {:7.3} {:7.3} yaw {:7.2} j {}",
+        qpos[0],
+        qpos[1],
+        qpos[2],
+        yaw_deg(qpos),
+        hinges.join(" ")
+    );
 }
 
 /// Reorders per-hinge values (observation order) into actuator order.
@@ -176,7 +263,9 @@ fn to_actuator_order(joint_values: &[f32; N_JOINTS]) -> [f32; N_JOINTS] {
 /// Heading about z (deg) from the qpos quaternion (w, x, y, z).
 fn yaw_deg(qpos: &[f32; QPOS_DIM]) -> f64 {
     let [w, x, y, z] = [qpos[3], qpos[4], qpos[5], qpos[6]].map(f64::from);
-    (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z)).to_degrees()
+    (2.0 * (w * z + x * y))
+        .atan2(1.0 - 2.0 * (y * y + z * z))
+        .to_degrees()
 }
 
 /// Test 2: random torques from noisy starts.
@@ -204,12 +293,7 @@ fn random(params: &AntParams, episodes: u64) -> Result<String, EnvError> {
 /// One random episode: returns (final xy distance from the start, whether it flipped).
 fn random_episode(ant: &mut Ant, params: &AntParams, episode: u64) -> (f64, bool) {
     let mut rng = SplitMix64(episode);
-    let noise = f64::from(params.reset_qpos_noise);
-    let qpos0 = params.qpos0();
-    let mut qpos = [0.0f32; QPOS_DIM];
-    for (value, base) in qpos.iter_mut().zip(qpos0) {
-        *value = (f64::from(base) + rng.symmetric(noise)) as f32;
-    }
+    let qpos = noisy_qpos0(params, &mut rng, f64::from(params.reset_qpos_noise));
     ant.rebuild();
     ant.set_state(&qpos, &[0.0; QVEL_DIM]);
     let [x0, y0] = ant.xy();

@@ -26,8 +26,8 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 use rapier3d::prelude::{
-    ColliderBuilder, Multibody, MultibodyIndex, PhysicsWorld, Pose, RevoluteJointBuilder, Rotation,
-    RigidBodyBuilder, RigidBodyHandle, Vector,
+    ColliderBuilder, Multibody, MultibodyIndex, PhysicsWorld, Pose, RevoluteJointBuilder,
+    RigidBodyBuilder, RigidBodyHandle, Rotation, Vector,
 };
 use serde::{Deserialize, Serialize};
 
@@ -107,10 +107,13 @@ pub struct AntParams {
     /// Motor gear: torque = gear × action. Default 1. Unit: N·m per action unit.
     /// Source: digest §9.4 (no gear attribute).
     pub gear: f32,
-    /// Physics step. Default 0.02. Unit: s. Source: digest §9.4 (MuJoCo timestep).
+    /// Rapier physics step. Default 0.04. Unit: s. Source: tuned. MuJoCo steps 0.02 s with
+    /// RK4 (four force evaluations per step); one semi-implicit rapier step of 0.04 s with
+    /// implicit joint damping matched the MuJoCo random-torque statistics within a few percent
+    /// (`docs/ENVIRONMENTS.md`) and is what makes the 2,000 control steps/s target.
     pub timestep_secs: f32,
-    /// Physics steps per control step (control step = timestep × frame_skip = 0.2 s).
-    /// Default 10. Unit: count. Source: digest §9.4.
+    /// Physics steps per control step; the control step timestep × frame_skip = 0.2 s equals
+    /// MuJoCo's 0.02 × 10. Default 5. Unit: count. Source: digest §9.4 (0.2 s), tuned split.
     pub frame_skip: u32,
     /// Reset noise on every qpos entry: U(−this, this). Default 0.1. Unit: qpos units (m,
     /// quaternion, rad). Source: digest §9.4.
@@ -138,12 +141,17 @@ impl Default for AntParams {
             joint_armature_kg_m2: 1.0,
             friction: 1.0,
             hip_range_deg: 30.0,
-            ankle_axes: [[-1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 1.0, 0.0]],
+            ankle_axes: [
+                [-1.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [-1.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
             ankle_ranges_deg: [[30.0, 70.0], [-70.0, -30.0], [-70.0, -30.0], [30.0, 70.0]],
             ctrl_range: 16.0,
             gear: 1.0,
-            timestep_secs: 0.02,
-            frame_skip: 10,
+            timestep_secs: 0.04,
+            frame_skip: 5,
             reset_qpos_noise: 0.1,
             reset_qvel_noise_std: 0.1,
             gravity_m_s2: 9.81,
@@ -183,7 +191,11 @@ impl AntParams {
             physics::check_non_negative(name, value, &mut errors);
         }
         if self.frame_skip == 0 {
-            errors.push(physics::invalid("frame_skip".into(), self.frame_skip, "must be at least 1"));
+            errors.push(physics::invalid(
+                "frame_skip".into(),
+                self.frame_skip,
+                "must be at least 1",
+            ));
         }
         self.check_legs(&mut errors);
         self.solver.check("solver", &mut errors);
@@ -195,17 +207,29 @@ impl AntParams {
             let [sx, sy] = self.leg_directions[leg];
             if !(sx.abs() == 1.0 && sy.abs() == 1.0) {
                 let field = format!("leg_directions[{leg}]");
-                errors.push(physics::invalid(field, format!("{:?}", [sx, sy]), "entries must be ±1"));
+                errors.push(physics::invalid(
+                    field,
+                    format!("{:?}", [sx, sy]),
+                    "entries must be ±1",
+                ));
             }
             let axis = Vector::from_array(self.ankle_axes[leg]);
             if !(axis.is_finite() && axis.length() > 0.0) {
                 let field = format!("ankle_axes[{leg}]");
-                errors.push(physics::invalid(field, format!("{axis:?}"), "must be finite and non-zero"));
+                errors.push(physics::invalid(
+                    field,
+                    format!("{axis:?}"),
+                    "must be finite and non-zero",
+                ));
             }
             let [low, high] = self.ankle_ranges_deg[leg];
             if !(low.is_finite() && high.is_finite() && low < high) {
                 let field = format!("ankle_ranges_deg[{leg}]");
-                errors.push(physics::invalid(field, format!("{:?}", [low, high]), "needs finite low < high"));
+                errors.push(physics::invalid(
+                    field,
+                    format!("{:?}", [low, high]),
+                    "needs finite low < high",
+                ));
             }
         }
     }
@@ -282,7 +306,10 @@ impl Ant {
 
     /// Total mass of the nine bodies (kg); ≈ 0.91 with the default parameters.
     pub fn total_mass(&self) -> f32 {
-        self.bodies.iter().map(|handle| self.world.bodies[*handle].mass()).sum()
+        self.bodies
+            .iter()
+            .map(|handle| self.world.bodies[*handle].mass())
+            .sum()
     }
 
     /// MuJoCo-style generalised positions (see the module invariants).
@@ -328,7 +355,8 @@ impl Ant {
         let (multibody, bodies) = multibody;
         let mut displacement = vec![0.0; multibody.ndofs()];
         for (joint, hinge) in hinges.iter().enumerate() {
-            displacement[dof_index[joint]] = qpos[QPOS_JOINTS + joint] - hinge_angle(multibody, hinge);
+            displacement[dof_index[joint]] =
+                qpos[QPOS_JOINTS + joint] - hinge_angle(multibody, hinge);
         }
         multibody.apply_displacements(&displacement);
         let angvel_world = rotation * Vector::new(qvel[3], qvel[4], qvel[5]);
@@ -347,7 +375,10 @@ impl Ant {
 
     /// Whether every generalised coordinate is finite.
     pub fn is_finite(&self) -> bool {
-        self.qpos().iter().chain(self.qvel().iter()).all(|v| v.is_finite())
+        self.qpos()
+            .iter()
+            .chain(self.qvel().iter())
+            .all(|v| v.is_finite())
     }
 
     /// Rebuilds the world at `qpos0` with zero velocity (fresh solver and contact caches).
@@ -394,7 +425,9 @@ impl Ant {
         multibody.damping_mut().fill(0.0);
         let mut dof_index = [0; N_JOINTS];
         for (joint, hinge) in hinges.iter().enumerate() {
-            let dof = multibody.link(hinge.link_id).map_or(0, |link| link.assembly_id());
+            let dof = multibody
+                .link(hinge.link_id)
+                .map_or(0, |link| link.assembly_id());
             debug_assert!(dof >= ROOT_DOFS, "hinge DoFs follow the free root's six");
             multibody.armature_mut()[dof] = armature;
             multibody.damping_mut()[dof] = damping;
@@ -410,7 +443,9 @@ impl Ant {
             .expect("invariant: the ant's multibody lives as long as its world")
     }
 
-    fn multibody_mut_with_bodies(&mut self) -> (&mut Multibody, &mut rapier3d::prelude::RigidBodySet) {
+    fn multibody_mut_with_bodies(
+        &mut self,
+    ) -> (&mut Multibody, &mut rapier3d::prelude::RigidBodySet) {
         let multibody = self
             .world
             .multibody_joints
@@ -475,7 +510,9 @@ impl Robot for Ant {
 
 /// A hinge's angle (rad), read from the multibody's joint coordinates.
 fn hinge_angle(multibody: &Multibody, hinge: &Hinge) -> f32 {
-    multibody.link(hinge.link_id).map_or(0.0, |link| link.joint.coords()[HINGE_COORD])
+    multibody
+        .link(hinge.link_id)
+        .map_or(0.0, |link| link.joint.coords()[HINGE_COORD])
 }
 
 /// Builds the world: floor, walls and the ant at `qpos0`.
@@ -537,7 +574,15 @@ fn build_leg(
     let thigh = world.insert_body(dynamic_body(torso_position + hip_reach));
     world.insert_collider(leg_collider(params, hip_reach), Some(thigh));
     let hip_range = params.hip_range_deg.to_radians();
-    let hip = attach_hinge(world, params, torso, thigh, hip_reach, Vector::Z, [-hip_range, hip_range]);
+    let hip = attach_hinge(
+        world,
+        params,
+        torso,
+        thigh,
+        hip_reach,
+        Vector::Z,
+        [-hip_range, hip_range],
+    );
 
     let shin = world.insert_body(dynamic_body(torso_position + 2.0 * hip_reach));
     world.insert_collider(leg_collider(params, shin_reach), Some(shin));
@@ -566,13 +611,23 @@ fn attach_hinge(
         .softness(params.solver.joint_limit_softness())
         .contacts_enabled(false);
     let attached = world.insert_multibody_joint(parent, child, joint);
-    debug_assert!(attached.is_some(), "a tree of new bodies cannot form a cycle");
-    Hinge { parent, child, axis_in_parent: axis, link_id: 0 }
+    debug_assert!(
+        attached.is_some(),
+        "a tree of new bodies cannot form a cycle"
+    );
+    Hinge {
+        parent,
+        child,
+        axis_in_parent: axis,
+        link_id: 0,
+    }
 }
 
 /// A dynamic body that never sleeps (an idle ant must still react to its next action).
 fn dynamic_body(translation: Vector) -> RigidBodyBuilder {
-    RigidBodyBuilder::dynamic().translation(translation).can_sleep(false)
+    RigidBodyBuilder::dynamic()
+        .translation(translation)
+        .can_sleep(false)
 }
 
 /// The torso sphere.

@@ -12,7 +12,7 @@
 //! - Nothing here is random: the same inputs build the same world.
 
 use rapier3d::prelude::{
-    ColliderBuilder, Group, InteractionGroups, InteractionTestMode, IntegrationParameters,
+    ColliderBuilder, Group, IntegrationParameters, InteractionGroups, InteractionTestMode,
     PhysicsWorld, RigidBodyBuilder, SharedShape, SpringCoefficients, Vector,
 };
 use serde::{Deserialize, Serialize};
@@ -95,7 +95,11 @@ impl SolverParams {
         ];
         for (name, value) in counts {
             if value == 0 {
-                errors.push(invalid(format!("{prefix}.{name}"), value, "must be at least 1"));
+                errors.push(invalid(
+                    format!("{prefix}.{name}"),
+                    value,
+                    "must be at least 1",
+                ));
             }
         }
         let positives = [
@@ -103,21 +107,32 @@ impl SolverParams {
             ("contact_damping_ratio", self.contact_damping_ratio),
             ("joint_limit_frequency_hz", self.joint_limit_frequency_hz),
             ("joint_limit_damping_ratio", self.joint_limit_damping_ratio),
-            ("max_corrective_velocity_m_s", self.max_corrective_velocity_m_s),
+            (
+                "max_corrective_velocity_m_s",
+                self.max_corrective_velocity_m_s,
+            ),
         ];
         for (name, value) in positives {
             check_positive(&format!("{prefix}.{name}"), value, errors);
         }
-        check_non_negative(&format!("{prefix}.contact_skin_m"), self.contact_skin_m, errors);
+        check_non_negative(
+            &format!("{prefix}.contact_skin_m"),
+            self.contact_skin_m,
+            errors,
+        );
     }
 
     /// Softness of the joint-limit constraints, for rapier joint builders.
     pub fn joint_limit_softness(&self) -> SpringCoefficients<f32> {
-        SpringCoefficients::new(self.joint_limit_frequency_hz, self.joint_limit_damping_ratio)
+        SpringCoefficients::new(
+            self.joint_limit_frequency_hz,
+            self.joint_limit_damping_ratio,
+        )
     }
 
     fn integration_parameters(&self, timestep_secs: f32) -> IntegrationParameters {
-        let contact = SpringCoefficients::new(self.contact_frequency_hz, self.contact_damping_ratio);
+        let contact =
+            SpringCoefficients::new(self.contact_frequency_hz, self.contact_damping_ratio);
         IntegrationParameters {
             dt: timestep_secs,
             num_solver_iterations: self.substeps,
@@ -133,7 +148,11 @@ impl SolverParams {
 
 /// An [`EnvError::InvalidParam`] for `field` holding `value`.
 pub fn invalid(field: String, value: impl std::fmt::Display, reason: &str) -> EnvError {
-    EnvError::InvalidParam { field, value: value.to_string(), reason: reason.to_string() }
+    EnvError::InvalidParam {
+        field,
+        value: value.to_string(),
+        reason: reason.to_string(),
+    }
 }
 
 /// Records an error unless `value` is finite and strictly positive.
@@ -159,7 +178,12 @@ pub fn into_result(mut errors: Vec<EnvError>) -> Result<(), EnvError> {
     let mut values = Vec::new();
     let mut reasons = Vec::new();
     for error in errors {
-        if let EnvError::InvalidParam { field, value, reason } = error {
+        if let EnvError::InvalidParam {
+            field,
+            value,
+            reason,
+        } = error
+        {
             reasons.push(format!("{field}: {reason}"));
             fields.push(field);
             values.push(value);
@@ -205,9 +229,17 @@ pub fn add_static_boxes(world: &mut PhysicsWorld, boxes: &[StaticBox], friction:
 pub fn check_static_boxes(boxes: &[StaticBox], errors: &mut Vec<EnvError>) {
     for (index, static_box) in boxes.iter().enumerate() {
         if !static_box.center.iter().all(|c| c.is_finite()) {
-            errors.push(invalid(format!("walls[{index}].center"), format!("{:?}", static_box.center), "must be finite"));
+            errors.push(invalid(
+                format!("walls[{index}].center"),
+                format!("{:?}", static_box.center),
+                "must be finite",
+            ));
         }
-        if !static_box.half_extents.iter().all(|h| h.is_finite() && *h > 0.0) {
+        if !static_box
+            .half_extents
+            .iter()
+            .all(|h| h.is_finite() && *h > 0.0)
+        {
             errors.push(invalid(
                 format!("walls[{index}].half_extents"),
                 format!("{:?}", static_box.half_extents),
