@@ -1,1 +1,28 @@
-//! learner crate.
+//! The ASI learner as a transport-agnostic state machine (SPEC §3, §6.1, §6.2, §6.8).
+//!
+//! The `asi` binary wires [`Learner`] to iceoryx2 (process mode) or to in-process queues
+//! (serial mode); this crate does no I/O and starts no threads.
+//!
+//! - [`replay`]: structure-of-arrays replay buffers for both levels, grown in blocks, ring
+//!   overwrite, uniform sampling into reusable staging.
+//! - [`ingest`]: per-episode chunk continuity (lost / duplicate chunks) and the building of
+//!   high-level transitions from decision steps across chunk boundaries.
+//! - [`ratio`]: the replay-ratio accounting and the actor throttle budget.
+//! - [`sac`]: SAC losses (pure functions, one module for both levels) and the update.
+//! - [`setup`]: the networks (published policy set, online and target critics).
+//! - [`learner`]: the [`Learner`] itself: ingest, train, publish, progress, metrics.
+//!
+//! Dependencies: `protocol` (wire types, config) and `nets` (networks) only.
+
+pub mod error;
+pub mod ingest;
+pub mod learner;
+pub mod ratio;
+pub mod replay;
+pub mod sac;
+pub mod setup;
+
+pub use error::LearnerError;
+pub use learner::{IngestStats, Learner, LearnerProgress};
+pub use nets::TaskDims;
+pub use ratio::ReplayRatio;

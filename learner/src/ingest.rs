@@ -1,0 +1,261 @@
+//! Chunk continuity per episode and the building of transitions from decoded step records.
+//!
+//! Chunks of one episode come from one actor, in order (`chunk_index` 0, 1, 2, …). For every
+//! open episode, keyed by `(actor, episode)` (episode ids are unique only within an actor), the
+//! learner keeps the next expected chunk index and the open high-level segment:
+//! - the next index: the chunk is stored;
+//! - a larger index: the chunks in between are lost (counted); the chunk is stored, but the open
+//!   segment is dropped (its reward sum would miss steps) and counted;
+//! - a smaller index, or any chunk of a recently finished episode up to its last index: a
+//!   duplicate, counted and not stored;
+//! - a larger index on a finished episode: refused (nothing follows an episode's end).
+//!
+//! High-level segments (SPEC §6.1): a segment opens at a decision step (obs, goal, stored
+//! action), sums the env rewards of its steps and notes any success, and closes at the next
+//! decision step (next_obs = that step's obs) or at the step that terminates or truncates the
+//! episode (next_obs = its next_obs, with its flags). An episode that ends without either flag
+//! (physics failure: the failing step is not sent) closes its segment as truncated, so the
+//! value still bootstraps from the last valid state.
+//!
+//! Memory bound: at most [`MAX_OPEN_EPISODES`] open episodes (a killed actor never sends its
+//! last chunk); beyond that the least recently touched one is abandoned and counted. Finished
+//! episodes are remembered ([`MAX_FINISHED_EPISODES`], oldest forgotten first) to recognise
+//! late repeats.
+
+use std::collections::{HashMap, VecDeque};
+
+use protocol::{ActorId, EpisodeId, StepView, TrajectoryFlags, TrajectoryHeader};
+
+use crate::error::LearnerError;
+use crate::replay::{HighReplay, HighTransition, LowReplay, LowTransition};
+
+/// Most episodes kept open at once (ours: far above actors × envs per actor).
+pub const MAX_OPEN_EPISODES: usize = 4096;
+/// Finished episodes remembered for duplicate detection (ours).
+pub const MAX_FINISHED_EPISODES: usize = 4096;
+
+type Key = (ActorId, EpisodeId);
+
+/// Where a chunk falls in its episode's sequence.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Continuity {
+    /// The next expected chunk (or chunk 0 of a new episode).
+    InOrder,
+    /// `lost` chunks were skipped before this one.
+    Gap {
+        /// Number of missing chunks.
+        lost: u64,
+    },
+}
+
+/// A high-level segment in progress.
+#[derive(Debug, Clone)]
+struct OpenSegment {
+    obs: Vec<f32>,
+    goal: Vec<f32>,
+    action: Vec<f32>,
+    reward: f64,
+    success: bool,
+}
+
+impl OpenSegment {
+    /// Opens a segment at decision step `step`.
+    fn start(step: &StepView) -> Self {
+        Self {
+            obs: step.obs.to_vec(),
+            goal: step.goal.to_vec(),
+            action: step.high_action.to_vec(),
+            reward: 0.0,
+            success: false,
+        }
+    }
+
+    /// Closes the segment into the high buffer.
+    fn close(&self, high: &mut HighReplay, next_obs: &[f32], terminated: bool, truncated: bool) {
+        high.push(&HighTransition {
+            obs: &self.obs,
+            goal: &self.goal,
+            action: &self.action,
+            reward: self.reward as f32,
+            next_obs,
+            mask: if self.success { 0.0 } else { 1.0 },
+            terminated,
+            truncated,
+        });
+    }
+}
+
+/// State of one open episode.
+#[derive(Debug, Clone, Default)]
+struct OpenEpisode {
+    next_chunk: u32,
+    segment: Option<OpenSegment>,
+    touched: u64,
+}
+
+/// What one stored chunk produced.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ChunkOutcome {
+    /// High-level transitions completed by this chunk.
+    pub high_added: u64,
+    /// The chunk ended its episode.
+    pub episode_ended: bool,
+    /// Open segments dropped because of a gap.
+    pub segments_dropped: u64,
+}
+
+/// Per-episode continuity and open segments.
+#[derive(Debug, Clone, Default)]
+pub struct Episodes {
+    open: HashMap<Key, OpenEpisode>,
+    finished: HashMap<Key, u32>,
+    finished_order: VecDeque<Key>,
+    clock: u64,
+    abandoned: u64,
+}
+
+impl Episodes {
+    /// Classifies `header`'s chunk without changing anything; duplicates and chunks after an
+    /// episode's end are errors.
+    pub fn check(&self, header: &TrajectoryHeader) -> Result<Continuity, LearnerError> {
+        let key = (header.actor_id, header.episode_id);
+        let index = header.chunk_index;
+        if let Some(&last) = self.finished.get(&key) {
+            return Err(if index <= last {
+                duplicate(header, last.saturating_add(1))
+            } else {
+                LearnerError::AfterEpisodeEnd { actor: key.0, episode: key.1, chunk_index: index, last }
+            });
+        }
+        let next = self.open.get(&key).map_or(0, |e| e.next_chunk);
+        match index.cmp(&next) {
+            std::cmp::Ordering::Less => Err(duplicate(header, next)),
+            std::cmp::Ordering::Equal => Ok(Continuity::InOrder),
+            std::cmp::Ordering::Greater => Ok(Continuity::Gap { lost: u64::from(index - next) }),
+        }
+    }
+
+    /// Stores a checked chunk: every step into `low`, completed segments into `high`.
+    pub fn store(
+        &mut self,
+        header: &TrajectoryHeader,
+        continuity: Continuity,
+        steps: &[StepView],
+        low: &mut LowReplay,
+        high: &mut HighReplay,
+    ) -> ChunkOutcome {
+        self.clock += 1;
+        let key = (header.actor_id, header.episode_id);
+        let entry = self.open.entry(key).or_default();
+        let mut outcome = ChunkOutcome::default();
+        if matches!(continuity, Continuity::Gap { .. }) && entry.segment.take().is_some() {
+            outcome.segments_dropped += 1;
+        }
+        entry.next_chunk = header.chunk_index.saturating_add(1);
+        entry.touched = self.clock;
+        for step in steps {
+            low.push(&low_transition(step));
+            outcome.high_added += advance_segment(&mut entry.segment, step, high);
+        }
+        if header.flags.contains(TrajectoryFlags::EPISODE_END) {
+            outcome.high_added += close_at_end(&mut entry.segment, steps, high);
+            self.finish(key, header.chunk_index);
+            outcome.episode_ended = true;
+        }
+        outcome.segments_dropped += self.evict_if_full();
+        outcome
+    }
+
+    /// Episodes currently open.
+    pub fn n_open(&self) -> usize {
+        self.open.len()
+    }
+
+    /// Open episodes abandoned because the table was full.
+    pub fn n_abandoned(&self) -> u64 {
+        self.abandoned
+    }
+
+    /// Moves `key` from the open table to the finished memory.
+    fn finish(&mut self, key: Key, last_chunk: u32) {
+        self.open.remove(&key);
+        self.finished.insert(key, last_chunk);
+        self.finished_order.push_back(key);
+        if self.finished_order.len() > MAX_FINISHED_EPISODES {
+            if let Some(old) = self.finished_order.pop_front() {
+                self.finished.remove(&old);
+            }
+        }
+    }
+
+    /// Abandons the least recently touched open episode when over the cap; returns the number
+    /// of open segments lost with it.
+    fn evict_if_full(&mut self) -> u64 {
+        if self.open.len() <= MAX_OPEN_EPISODES {
+            return 0;
+        }
+        let oldest = self.open.iter().min_by_key(|(_, e)| e.touched).map(|(k, _)| *k);
+        let Some(key) = oldest else { return 0 };
+        self.abandoned += 1;
+        self.open.remove(&key).map_or(0, |e| u64::from(e.segment.is_some()))
+    }
+}
+
+/// The duplicate error for `header`.
+fn duplicate(header: &TrajectoryHeader, expected: u32) -> LearnerError {
+    LearnerError::DuplicateChunk {
+        actor: header.actor_id,
+        episode: header.episode_id,
+        chunk_index: header.chunk_index,
+        expected,
+    }
+}
+
+/// The low-level transition of one step record.
+fn low_transition<'a>(step: &StepView<'a>) -> LowTransition<'a> {
+    LowTransition {
+        obs: step.obs,
+        phi: step.phi,
+        action: step.action,
+        subgoal: step.subgoal,
+        next_obs: step.next_obs,
+        next_phi: step.next_phi,
+        terminated: step.terminated,
+        truncated: step.truncated,
+    }
+}
+
+/// Feeds one step to the segment state; returns the number of segments it closed (0–2).
+fn advance_segment(segment: &mut Option<OpenSegment>, step: &StepView, high: &mut HighReplay) -> u64 {
+    let mut closed = 0;
+    if step.decision.is_decision() {
+        if let Some(done) = segment.take() {
+            done.close(high, step.obs, false, false);
+            closed += 1;
+        }
+        *segment = Some(OpenSegment::start(step));
+    }
+    if let Some(open) = segment.as_mut() {
+        open.reward += f64::from(step.reward);
+        open.success |= step.success;
+    }
+    if step.terminated || step.truncated {
+        if let Some(done) = segment.take() {
+            done.close(high, step.next_obs, step.terminated, step.truncated);
+            closed += 1;
+        }
+    }
+    closed
+}
+
+/// Closes a segment left open at the episode's end (no terminated/truncated flag: physics
+/// failure) as truncated at the last stored state.
+fn close_at_end(segment: &mut Option<OpenSegment>, steps: &[StepView], high: &mut HighReplay) -> u64 {
+    match (segment.take(), steps.last()) {
+        (Some(done), Some(last)) => {
+            done.close(high, last.next_obs, false, true);
+            1
+        }
+        _ => 0,
+    }
+}

@@ -1,0 +1,501 @@
+//! [`Learner`]: the learner process's state machine, with no I/O and no threads. The `asi`
+//! binary feeds it chunks ([`Learner::ingest`]), lets it train ([`Learner::train`]), forwards
+//! the weights it produces ([`Learner::publish_due`]) and reads [`Learner::progress`] to
+//! throttle the actors.
+//!
+//! Invariants:
+//! - A chunk is stored entirely or not at all: header, layout, every record and its place in
+//!   the episode are checked before any buffer changes.
+//! - Updates never exceed the replay ratio ([`crate::ratio`]); the budget never deadlocks.
+//! - Published policy versions only go up: the first publication is version 0 (the initial
+//!   weights), each later one is the previous + 1.
+//!
+//! Weights schedule (choice): a new version is due when at least one update has run since the
+//! last publication and at least `transport.weights_check_interval_steps` env steps have been
+//! ingested since then — the cadence at which actors look for weights anyway. The very first
+//! call publishes the initial weights so actors never act with weights of their own.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+use candle_nn::VarMap;
+use nets::{spec_from_config, NetsSpec, TaskDims};
+use protocol::config::LowAlgo;
+use protocol::{Config, PhiVersion, PolicyVersion, StepLayout, StepView, TrajectoryHeader, WeightsHeader};
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rand_pcg::Pcg64Mcg;
+
+use crate::error::LearnerError;
+use crate::ingest::Episodes;
+use crate::ratio::ReplayRatio;
+use crate::replay::{sample_into, BatchStage, HighReplay, LowReplay, LowRewardSpec};
+use crate::sac::{SacBatch, SacLevel, SacStats};
+use crate::setup::{build_networks, deterministic_unsupported, Networks};
+
+/// Offset of the sampling RNG seed from the run seed (ours; keeps it apart from the init).
+const SAMPLING_SEED_OFFSET: u64 = 0x5a3b_1e00;
+
+/// Where training stands; the actor throttle reads `env_steps_ingested` and `env_step_budget`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LearnerProgress {
+    /// Env steps stored so far (all actors, duplicates excluded).
+    pub env_steps_ingested: u64,
+    /// Actors stop producing while `env_steps_ingested ≥ env_step_budget` (SPEC §6.8).
+    pub env_step_budget: u64,
+    /// Low-level SAC updates run.
+    pub updates_low: u64,
+    /// High-level SAC updates run.
+    pub updates_high: u64,
+    /// Latest published policy version.
+    pub policy_version: PolicyVersion,
+    /// Latest published φ version.
+    pub phi_version: PhiVersion,
+}
+
+/// Ingest counters.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct IngestStats {
+    /// Chunks stored.
+    pub chunks: u64,
+    /// Env steps stored.
+    pub env_steps: u64,
+    /// Env steps stored per actor id.
+    pub per_actor_steps: BTreeMap<u32, u64>,
+    /// Chunks that never arrived (gaps in an episode's chunk indices).
+    pub lost_chunks: u64,
+    /// Repeated chunks (counted, not stored).
+    pub duplicate_chunks: u64,
+    /// Malformed or mismatched chunks (refused, nothing stored).
+    pub rejected_chunks: u64,
+    /// Episodes whose final chunk was stored.
+    pub episodes_completed: u64,
+    /// High-level transitions stored.
+    pub high_transitions: u64,
+    /// Open high-level segments dropped (a gap, or an abandoned episode).
+    pub dropped_segments: u64,
+    /// Open episodes abandoned because too many were open at once.
+    pub abandoned_episodes: u64,
+}
+
+/// Publication bookkeeping.
+#[derive(Debug, Clone, Copy, Default)]
+struct PublishState {
+    published_once: bool,
+    steps_at_last: u64,
+    updates_at_last: u64,
+}
+
+/// Metrics-only measurements.
+#[derive(Debug, Clone, Copy, Default)]
+struct Telemetry {
+    low: SacStats,
+    high: SacStats,
+    train_secs: f64,
+    updates_timed: u64,
+    last_policy_lag: u64,
+    max_policy_lag: u64,
+}
+
+/// The learner state machine. See the module doc.
+pub struct Learner {
+    layout: StepLayout,
+    spec: NetsSpec,
+    nets: Networks,
+    low_replay: LowReplay,
+    high_replay: HighReplay,
+    low_stage: BatchStage,
+    high_stage: BatchStage,
+    episodes: Episodes,
+    ratio: ReplayRatio,
+    rng: Pcg64Mcg,
+    noise: Vec<f32>,
+    stats: IngestStats,
+    updates_low: u64,
+    updates_high: u64,
+    policy_version: PolicyVersion,
+    phi_version: PhiVersion,
+    publish: PublishState,
+    publish_interval_steps: u64,
+    telemetry: Telemetry,
+}
+
+impl Learner {
+    /// A learner for `config` and the task's `dims`; `seed` seeds the networks and sampling.
+    /// The low replay ratio comes from `learner.low.updates_per_env_step`, else from
+    /// `env.episode_length`; when neither is set use [`Learner::with_episode_length`] with the
+    /// task's own episode length.
+    pub fn new(config: &Config, dims: TaskDims, seed: u64) -> Result<Learner, LearnerError> {
+        let explicit = config.learner.low.updates_per_env_step.is_some();
+        match config.env.episode_length {
+            Some(length) => Self::with_episode_length(config, dims, length, seed),
+            None if explicit => Self::with_episode_length(config, dims, 1, seed),
+            None => Err(LearnerError::Unsupported {
+                key: "env.episode_length",
+                reason: "needed to derive learner.low.updates_per_env_step; set one of them or \
+                         build the learner with Learner::with_episode_length(task length)"
+                    .to_owned(),
+            }),
+        }
+    }
+
+    /// As [`Learner::new`], with the task's `episode_length` (env steps) for the derived low
+    /// ratio `updates_per_episode / episode_length`; `env.episode_length` overrides it.
+    pub fn with_episode_length(config: &Config, dims: TaskDims, episode_length: u32, seed: u64) -> Result<Learner, LearnerError> {
+        config.validate()?;
+        if config.learner.low.algo == LowAlgo::Deterministic {
+            return Err(deterministic_unsupported());
+        }
+        let spec = spec_from_config(config, dims)?;
+        let layout = StepLayout::new(spec.obs_dim, spec.action_dim, spec.goal_dim, spec.latent_dim)
+            .map_err(|err| LearnerError::Nets(nets::NetsError::Spec(err.to_string())))?;
+        let nets = build_networks(config, &spec, seed)?;
+        let length = config.env.episode_length.unwrap_or(episode_length);
+        let (low_replay, high_replay) = buffers(config, &spec);
+        Ok(Learner {
+            layout,
+            low_stage: low_replay.stage(config.learner.low.batch_size),
+            high_stage: high_replay.stage(config.learner.high.batch_size),
+            low_replay,
+            high_replay,
+            episodes: Episodes::default(),
+            ratio: replay_ratio(config, length),
+            rng: Pcg64Mcg::seed_from_u64(seed.wrapping_add(SAMPLING_SEED_OFFSET)),
+            noise: Vec::new(),
+            stats: IngestStats::default(),
+            updates_low: 0,
+            updates_high: 0,
+            policy_version: PolicyVersion(0),
+            phi_version: PhiVersion(0),
+            publish: PublishState::default(),
+            publish_interval_steps: u64::from(config.transport.weights_check_interval_steps),
+            telemetry: Telemetry::default(),
+            spec,
+            nets,
+        })
+    }
+
+    /// Checks and stores one trajectory chunk (see the module doc of [`crate::ingest`]).
+    /// Malformed or mismatched chunks are counted in `rejected_chunks`, repeats in
+    /// `duplicate_chunks`; both return an error and change no buffer.
+    pub fn ingest(&mut self, header: &TrajectoryHeader, payload: &[f32]) -> Result<(), LearnerError> {
+        let steps = self.decode(header, payload).inspect_err(|_| self.stats.rejected_chunks += 1)?;
+        let continuity = self.episodes.check(header).inspect_err(|err| match err {
+            LearnerError::DuplicateChunk { .. } => self.stats.duplicate_chunks += 1,
+            _ => self.stats.rejected_chunks += 1,
+        })?;
+        if let crate::ingest::Continuity::Gap { lost } = continuity {
+            self.stats.lost_chunks += lost;
+        }
+        let outcome = self.episodes.store(header, continuity, &steps, &mut self.low_replay, &mut self.high_replay);
+        self.count_stored(header, steps.len() as u64, &outcome);
+        Ok(())
+    }
+
+    /// Header and records, checked against the learner's layout; nothing is changed.
+    fn decode<'a>(&self, header: &TrajectoryHeader, payload: &'a [f32]) -> Result<Vec<StepView<'a>>, LearnerError> {
+        let rejected = |source| LearnerError::Rejected {
+            actor: header.actor_id,
+            episode: header.episode_id,
+            chunk_index: header.chunk_index,
+            source,
+        };
+        let layout = header.check(payload.len()).map_err(rejected)?;
+        if layout != self.layout {
+            return Err(LearnerError::LayoutMismatch {
+                actor: header.actor_id,
+                episode: header.episode_id,
+                chunk_index: header.chunk_index,
+                expected: self.layout,
+                found: layout,
+            });
+        }
+        layout.view_chunk(payload, header.n_steps as usize).map_err(rejected)
+    }
+
+    /// Counters after a stored chunk.
+    fn count_stored(&mut self, header: &TrajectoryHeader, n_steps: u64, outcome: &crate::ingest::ChunkOutcome) {
+        let s = &mut self.stats;
+        s.chunks += 1;
+        s.env_steps += n_steps;
+        *s.per_actor_steps.entry(header.actor_id.0).or_default() += n_steps;
+        s.episodes_completed += u64::from(outcome.episode_ended);
+        s.high_transitions += outcome.high_added;
+        s.dropped_segments += outcome.segments_dropped;
+        s.abandoned_episodes = self.episodes.n_abandoned();
+        let lag = self.policy_version.0.saturating_sub(header.policy_version.0);
+        self.telemetry.last_policy_lag = lag;
+        self.telemetry.max_policy_lag = self.telemetry.max_policy_lag.max(lag);
+    }
+
+    /// Low updates the ratio allows now.
+    fn low_due(&self) -> u64 {
+        let stored = self.low_replay.ring().len() as u64;
+        self.ratio.low_allowed(self.stats.env_steps, stored).saturating_sub(self.updates_low)
+    }
+
+    /// High updates the ratio allows now.
+    fn high_due(&self) -> u64 {
+        let ring = self.high_replay.ring();
+        self.ratio.high_allowed(ring.total(), ring.len() as u64).saturating_sub(self.updates_high)
+    }
+
+    /// Runs the updates that the replay ratio allows now, at most `max_updates`, alternating
+    /// low and high; returns how many ran.
+    pub fn train(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
+        let start = Instant::now();
+        let mut done = 0;
+        while done < max_updates {
+            let before = done;
+            if self.low_due() > 0 {
+                self.low_update()?;
+                done += 1;
+            }
+            if done < max_updates && self.high_due() > 0 {
+                self.high_update()?;
+                done += 1;
+            }
+            if done == before {
+                break;
+            }
+        }
+        if done > 0 {
+            self.telemetry.train_secs += start.elapsed().as_secs_f64();
+            self.telemetry.updates_timed += done as u64;
+        }
+        Ok(done)
+    }
+
+    /// One low-level SAC update on a uniform batch.
+    fn low_update(&mut self) -> Result<(), LearnerError> {
+        let len = self.low_replay.ring().len();
+        let replay = &self.low_replay;
+        sample_into(&mut self.rng, len, &mut self.low_stage, |stage, k, i| replay.fill(stage, k, i));
+        let batch = to_tensors(&self.low_stage)?;
+        let (next_eps, eps) = self.noise_pair(self.low_stage.batch, self.spec.action_dim)?;
+        self.telemetry.low = self.nets.low.update(&batch, &next_eps, &eps)?;
+        self.updates_low += 1;
+        Ok(())
+    }
+
+    /// One high-level SAC update on a uniform batch.
+    fn high_update(&mut self) -> Result<(), LearnerError> {
+        let len = self.high_replay.ring().len();
+        let replay = &self.high_replay;
+        sample_into(&mut self.rng, len, &mut self.high_stage, |stage, k, i| replay.fill(stage, k, i));
+        let batch = to_tensors(&self.high_stage)?;
+        let (next_eps, eps) = self.noise_pair(self.high_stage.batch, self.spec.latent_dim)?;
+        self.telemetry.high = self.nets.high.update(&batch, &next_eps, &eps)?;
+        self.updates_high += 1;
+        Ok(())
+    }
+
+    /// Two `[batch, dim]` standard-normal tensors from the learner's generator.
+    fn noise_pair(&mut self, batch: usize, dim: usize) -> Result<(Tensor, Tensor), LearnerError> {
+        let mut draw = || -> Result<Tensor, LearnerError> {
+            self.noise.clear();
+            self.noise.extend((0..batch * dim).map(|_| -> f32 { StandardNormal.sample(&mut self.rng) }));
+            Ok(Tensor::from_slice(&self.noise, (batch, dim), &Device::Cpu)?)
+        };
+        Ok((draw()?, draw()?))
+    }
+
+    /// Actor-side weights (encoder, high policy, low policy) as safetensors bytes with their
+    /// header, if a new version is due (see the module doc for the schedule).
+    pub fn publish_due(&mut self) -> Result<Option<(WeightsHeader, Vec<u8>)>, LearnerError> {
+        let updates = self.updates_low + self.updates_high;
+        let p = self.publish;
+        let changed = updates > p.updates_at_last;
+        let waited = self.stats.env_steps.saturating_sub(p.steps_at_last) >= self.publish_interval_steps;
+        if p.published_once && !(changed && waited) {
+            return Ok(None);
+        }
+        let bytes = nets::to_safetensors_bytes(&self.nets.policy_vm)?;
+        let version = if p.published_once { PolicyVersion(self.policy_version.0 + 1) } else { self.policy_version };
+        let header = WeightsHeader::new(version, self.phi_version, self.weights_layout_hash(), bytes.len());
+        self.policy_version = version;
+        self.publish = PublishState { published_once: true, steps_at_last: self.stats.env_steps, updates_at_last: updates };
+        Ok(Some((header, bytes)))
+    }
+
+    /// Layout hash of the published parameter set ([`nets::layout_hash`]).
+    pub fn weights_layout_hash(&self) -> u64 {
+        nets::layout_hash(&self.nets.policy_vm)
+    }
+
+    /// Counters for the throttle and the progress display.
+    pub fn progress(&self) -> LearnerProgress {
+        LearnerProgress {
+            env_steps_ingested: self.stats.env_steps,
+            env_step_budget: self.ratio.env_step_budget(self.updates_low),
+            updates_low: self.updates_low,
+            updates_high: self.updates_high,
+            policy_version: self.policy_version,
+            phi_version: self.phi_version,
+        }
+    }
+
+    /// Ingest counters.
+    pub fn ingest_stats(&self) -> &IngestStats {
+        &self.stats
+    }
+
+    /// The replay-ratio constants in use.
+    pub fn replay_ratio(&self) -> ReplayRatio {
+        self.ratio
+    }
+
+    /// The record layout chunks must have.
+    pub fn step_layout(&self) -> StepLayout {
+        self.layout
+    }
+
+    /// The network spec (for checkpoints and the encoder trainer).
+    pub fn nets_spec(&self) -> &NetsSpec {
+        &self.spec
+    }
+
+    /// The published parameters (encoder, high policy, low policy).
+    pub fn policy_varmap(&self) -> &VarMap {
+        &self.nets.policy_vm
+    }
+
+    /// The low-level buffer.
+    pub fn low_replay(&self) -> &LowReplay {
+        &self.low_replay
+    }
+
+    /// The high-level buffer.
+    pub fn high_replay(&self) -> &HighReplay {
+        &self.high_replay
+    }
+
+    /// High-level SAC state (networks, α).
+    pub fn high_level(&self) -> &SacLevel {
+        &self.nets.high
+    }
+
+    /// Low-level SAC state (networks, α).
+    pub fn low_level(&self) -> &SacLevel {
+        &self.nets.low
+    }
+
+    /// Scalar metrics, names as in `docs/METRICS.md` (prefixes `losses/`, `charts/`,
+    /// `replay/`, `ingest/`).
+    pub fn metrics(&self) -> Vec<(&'static str, f64)> {
+        let mut out = sac_metrics(&self.telemetry.low, LOW_NAMES);
+        out.extend(sac_metrics(&self.telemetry.high, HIGH_NAMES));
+        out.extend(self.count_metrics());
+        out
+    }
+
+    /// Counter metrics.
+    fn count_metrics(&self) -> Vec<(&'static str, f64)> {
+        let t = &self.telemetry;
+        let s = &self.stats;
+        let per_sec = if t.train_secs > 0.0 { t.updates_timed as f64 / t.train_secs } else { 0.0 };
+        let p = self.progress();
+        vec![
+            ("charts/updates_per_sec", per_sec),
+            ("charts/updates_low", p.updates_low as f64),
+            ("charts/updates_high", p.updates_high as f64),
+            ("charts/policy_version", p.policy_version.0 as f64),
+            ("charts/policy_lag", t.last_policy_lag as f64),
+            ("charts/policy_lag_max", t.max_policy_lag as f64),
+            ("charts/env_step_budget", p.env_step_budget as f64),
+            ("replay/low_size", self.low_replay.ring().len() as f64),
+            ("replay/high_size", self.high_replay.ring().len() as f64),
+            ("replay/open_episodes", self.episodes.n_open() as f64),
+            ("ingest/chunks", s.chunks as f64),
+            ("ingest/env_steps", s.env_steps as f64),
+            ("ingest/lost_chunks", s.lost_chunks as f64),
+            ("ingest/duplicate_chunks", s.duplicate_chunks as f64),
+            ("ingest/rejected_chunks", s.rejected_chunks as f64),
+            ("ingest/episodes_completed", s.episodes_completed as f64),
+            ("ingest/dropped_segments", s.dropped_segments as f64),
+        ]
+    }
+}
+
+/// Metric names of one level's SAC statistics.
+struct SacNames {
+    critic: &'static str,
+    actor: &'static str,
+    alpha_loss: &'static str,
+    alpha: &'static str,
+    entropy: &'static str,
+    q: &'static str,
+}
+
+const LOW_NAMES: SacNames = SacNames {
+    critic: "losses/low_critic",
+    actor: "losses/low_actor",
+    alpha_loss: "losses/low_alpha",
+    alpha: "charts/low_alpha",
+    entropy: "charts/low_entropy",
+    q: "charts/low_q",
+};
+
+const HIGH_NAMES: SacNames = SacNames {
+    critic: "losses/high_critic",
+    actor: "losses/high_actor",
+    alpha_loss: "losses/high_alpha",
+    alpha: "charts/high_alpha",
+    entropy: "charts/high_entropy",
+    q: "charts/high_q",
+};
+
+/// The last update's statistics under `names`.
+fn sac_metrics(s: &SacStats, names: SacNames) -> Vec<(&'static str, f64)> {
+    vec![
+        (names.critic, s.critic.loss),
+        (names.actor, s.actor.loss),
+        (names.alpha_loss, s.alpha_loss),
+        (names.alpha, s.alpha),
+        (names.entropy, s.actor.entropy),
+        (names.q, 0.5 * (s.critic.q1_mean + s.critic.q2_mean)),
+    ]
+}
+
+/// Empty buffers sized from `[replay]`: low `capacity_steps`, high `capacity_steps / c`.
+fn buffers(config: &Config, spec: &NetsSpec) -> (LowReplay, HighReplay) {
+    let capacity = usize::try_from(config.replay.capacity_steps).unwrap_or(usize::MAX);
+    let high_capacity = capacity / config.hierarchy.c.max(1) as usize;
+    let reward = LowRewardSpec {
+        scale: config.hierarchy.low_reward_scale as f32,
+        threshold: config.hierarchy.low_reach_threshold as f32,
+    };
+    let low = LowReplay::new(capacity, spec.obs_dim, spec.latent_dim, spec.action_dim, reward);
+    let high = HighReplay::new(high_capacity, spec.obs_dim, spec.goal_dim, spec.latent_dim);
+    (low, high)
+}
+
+/// The replay-ratio constants of `config` for episodes of `episode_length` steps.
+fn replay_ratio(config: &Config, episode_length: u32) -> ReplayRatio {
+    ReplayRatio {
+        low_per_env_step: config.learner.low.updates_per_env_step_for(episode_length),
+        low_batch: config.learner.low.batch_size as u64,
+        high_per_transition: config.learner.high.updates_per_transition,
+        high_min_transitions: config.learner.high.min_transitions,
+        slack_steps: config.replay.replay_slack_steps,
+    }
+}
+
+/// The staged batch as tensors (one copy each).
+fn to_tensors(stage: &BatchStage) -> Result<SacBatch, LearnerError> {
+    let b = stage.batch;
+    let cpu = Device::Cpu;
+    let head_w = stage.head.len() / b.max(1);
+    let tail_w = stage.tail.len() / b.max(1);
+    let action_w = stage.action.len() / b.max(1);
+    let tail = if tail_w == 0 { None } else { Some(Tensor::from_slice(&stage.tail, (b, tail_w), &cpu)?) };
+    Ok(SacBatch {
+        head: Tensor::from_slice(&stage.head, (b, head_w), &cpu)?,
+        next_head: Tensor::from_slice(&stage.next_head, (b, head_w), &cpu)?,
+        tail,
+        action: Tensor::from_slice(&stage.action, (b, action_w), &cpu)?,
+        reward: Tensor::from_slice(&stage.reward, (b, 1), &cpu)?,
+        terminal: Tensor::from_slice(&stage.terminal, (b, 1), &cpu)?,
+    })
+}
