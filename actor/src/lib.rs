@@ -1,1 +1,32 @@
-//! actor crate.
+//! The ASI actor: rollouts of one environment with the hierarchical policy, cut into trajectory
+//! chunks (SPEC §3, §6.1; `docs/ARCHITECTURE.md`).
+//!
+//! - [`actor`]: [`Actor`], the transport-agnostic state machine (`next_chunk`, `load_weights`,
+//!   `stats`), [`ActorStats`].
+//! - [`chunk`]: [`Chunk`] and the buffer chunks are cut from.
+//! - [`episode`]: one episode's stepping: high-level decisions every c steps, low-level actions,
+//!   φ labels, records.
+//! - [`subgoal`]: [`SubgoalSource`], how the high level decides (random warm-up, policy).
+//! - [`exploration`]: sampling and noise for both levels, clipping.
+//! - [`networks`]: φ, π_hi, π_lo inference with double-buffered weights.
+//! - [`record`]: writing records into the `[f32]` payload.
+//! - [`seeds`]: episode ids and per-episode env seeds.
+//!
+//! Invariants: no I/O and no threads here (the `asi` binary wires transport); every random
+//! choice comes from generators seeded from `(seed, actor_id)`, so runs replay exactly; errors are
+//! [`ActorError`], never panics.
+
+pub mod actor;
+pub mod chunk;
+mod episode;
+pub mod error;
+mod exploration;
+mod networks;
+mod record;
+pub mod seeds;
+pub mod subgoal;
+
+pub use actor::{Actor, ActorStats};
+pub use chunk::Chunk;
+pub use error::{ActorError, WeightsRejection};
+pub use subgoal::SubgoalSource;

@@ -1,0 +1,345 @@
+//! [`Actor`]: the rollout component as a transport-agnostic state machine (SPEC §3, §6.1).
+//!
+//! The caller drives it: [`Actor::next_chunk`] steps the environment until a chunk is complete
+//! and returns it; [`Actor::load_weights`] installs a weights message between calls. The actor
+//! does no I/O and owns no threads, so the `asi` binary can wire it to iceoryx2 (process mode)
+//! or to in-process queues (serial mode) with the same behaviour.
+//!
+//! Invariants:
+//! - Determinism: for a given config, actor id, seed and sequence of calls (including which
+//!   weights are loaded between which chunks), the chunks are bit-identical.
+//! - Every chunk is non-empty; chunk indices of an episode run 0, 1, 2, … without gaps;
+//!   `EPISODE_START` marks exactly the first chunk and `EPISODE_END` exactly the last.
+//! - Episode ids are `(actor_id << 40) | local episode index` ([`crate::seeds::episode_id`]),
+//!   unique across the actors of a run; env seeds derive from `(seed, actor_id, episode)`.
+//! - A chunk's `policy_version` is the version that acted its first step (the oldest one in
+//!   it); its `phi_version` is the version of every φ value in its records.
+
+use envs::api::{Env, EnvSpec};
+use nets::{NetsSpec, TaskDims};
+use protocol::{
+    ActorId, Config, PhiVersion, PolicyVersion, StepLayout, TrajectoryFlags, TrajectoryHeader, WeightsHeader,
+};
+use rand::SeedableRng;
+use rand_pcg::Pcg64Mcg;
+
+use crate::chunk::{header_for, Chunk, ChunkBuffer};
+use crate::episode::{Episode, Rollout, RolloutParams, StepOutcome};
+use crate::error::{ActorError, WeightsRejection};
+use crate::exploration::DeterministicNoise;
+use crate::networks::ActorNets;
+use crate::record::RecordWriter;
+use crate::seeds::{actor_rng_seed, env_seed, episode_id};
+use crate::subgoal::SubgoalSource;
+
+/// Consecutive episodes without a single recorded step after which [`Actor::next_chunk`] gives up
+/// with [`ActorError::NoProgress`] instead of looping on a broken environment. Source: ours.
+pub const MAX_EMPTY_EPISODES: u32 = 100;
+
+/// Counters of one actor, for metrics.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActorStats {
+    /// Env steps taken (recorded or not), over all episodes.
+    pub env_steps: u64,
+    /// Episodes finished (ended by truncation or termination; abandoned ones excluded).
+    pub episodes: u64,
+    /// Policy version acting now.
+    pub policy_version: PolicyVersion,
+    /// φ version acting now.
+    pub phi_version: PhiVersion,
+    /// Steps whose physics blew up (from the environment's counter).
+    pub n_physics_failures: u64,
+    /// Sum of the recorded rewards of the last finished episode.
+    pub last_episode_return: f32,
+    /// Whether the env reported success on any step of the last finished episode (training
+    /// episodes do not stop on success; reference code: the first success counts).
+    pub last_episode_success: bool,
+    /// Weights messages refused by [`Actor::load_weights`].
+    pub n_weights_rejected: u64,
+}
+
+/// One actor: an environment, the actor-side networks, and the episode in progress.
+pub struct Actor {
+    rollout: Rollout,
+    episode: Option<Episode>,
+    buffer: ChunkBuffer,
+    layout: StepLayout,
+    nets_spec: NetsSpec,
+    header_template: TrajectoryHeader,
+    actor_id: ActorId,
+    seed: u64,
+    chunk_steps: usize,
+    random_episodes: u64,
+    n_episodes_started: u64,
+    stats: ActorStats,
+}
+
+impl Actor {
+    /// Builds env (`envs::registry::make(&config.env.task)`), networks
+    /// (`nets::spec_from_config` with the env's dims; a `PolicySet` on a `VarMap` seeded from
+    /// `seed`, so a learner that builds its `PolicySet` first from the same seed starts from the
+    /// same weights) and the generator for noise (`Pcg64Mcg` from `seed` mixed with `actor_id`).
+    pub fn new(config: &Config, actor_id: ActorId, seed: u64) -> Result<Actor, ActorError> {
+        Self::with_env(config, actor_id, seed, envs::registry::make(&config.env.task)?)
+    }
+
+    /// As [`Actor::new`], on an environment the caller built (e.g. a task with non-default
+    /// parameters); `config.env.task` is not looked at.
+    pub fn with_env(config: &Config, actor_id: ActorId, seed: u64, env: Box<dyn Env>) -> Result<Actor, ActorError> {
+        config.validate()?;
+        let spec = env.spec().clone();
+        let dims = TaskDims {
+            obs_dim: spec.obs_dim,
+            goal_dim: spec.goal_dim,
+            action_dim: spec.action_dim,
+            action_scale: f64::from(symmetric_action_bound(&spec)?),
+        };
+        let nets_spec = nets::spec_from_config(config, dims)?;
+        let nets = ActorNets::new(&nets_spec, seed)?;
+        let layout = StepLayout::new(spec.obs_dim, spec.action_dim, spec.goal_dim, nets_spec.latent_dim)?;
+        let writer = RecordWriter::new(layout)?;
+        let mut header_template = TrajectoryHeader::for_layout(&layout)?;
+        header_template.actor_id = actor_id;
+        let params = rollout_params(config, &spec)?;
+        let chunk_steps = config.transport.chunk_steps as usize;
+        let rollout = Rollout {
+            env,
+            nets,
+            rng: Pcg64Mcg::seed_from_u64(actor_rng_seed(seed, actor_id)),
+            writer,
+            params,
+            action: vec![0.0; spec.action_dim],
+            zeros: vec![0.0; nets_spec.latent_dim],
+            record: vec![0.0; layout.record_len()],
+        };
+        Ok(Actor {
+            rollout,
+            episode: None,
+            buffer: ChunkBuffer::new(layout.record_len(), chunk_steps),
+            layout,
+            nets_spec,
+            header_template,
+            actor_id,
+            seed,
+            chunk_steps,
+            random_episodes: config.learner.high.random_episodes,
+            n_episodes_started: 0,
+            stats: ActorStats {
+                env_steps: 0,
+                episodes: 0,
+                policy_version: PolicyVersion(0),
+                phi_version: PhiVersion(0),
+                n_physics_failures: 0,
+                last_episode_return: 0.0,
+                last_episode_success: false,
+                n_weights_rejected: 0,
+            },
+        })
+    }
+
+    /// The record layout of this actor's chunks.
+    pub fn layout(&self) -> StepLayout {
+        self.layout
+    }
+
+    /// Layout hash of the actor-side tensors (encoder, high policy, low policy) — what the
+    /// learner publishes in [`WeightsHeader::layout_hash`].
+    pub fn layout_hash(&self) -> u64 {
+        self.rollout.nets.layout_hash()
+    }
+
+    /// The network spec the actor built (the learner must build the same).
+    pub fn nets_spec(&self) -> &NetsSpec {
+        &self.nets_spec
+    }
+
+    /// The acting parameters as safetensors bytes (names under `nets::prefix::ACTOR_SIDE`).
+    pub fn weights_bytes(&self) -> Result<Vec<u8>, ActorError> {
+        Ok(nets::to_safetensors_bytes(self.rollout.nets.varmap())?)
+    }
+
+    /// Steps the env until a chunk is complete: `transport.chunk_steps` records, or fewer at
+    /// episode end. Never returns an empty chunk. On error the current episode is abandoned.
+    pub fn next_chunk(&mut self) -> Result<Chunk, ActorError> {
+        let result = self.fill_chunk();
+        if let Err(err) = &result {
+            tracing::warn!(actor = self.actor_id.0, error = %err, "abandoning the current episode");
+            self.episode = None;
+            self.buffer.clear();
+        }
+        result
+    }
+
+    fn fill_chunk(&mut self) -> Result<Chunk, ActorError> {
+        let mut n_empty_episodes = 0;
+        loop {
+            if let Some(chunk) = self.take_ready_chunk() {
+                return Ok(chunk);
+            }
+            if self.episode.is_none() {
+                if n_empty_episodes == MAX_EMPTY_EPISODES {
+                    let (actor_id, n_episodes) = (self.actor_id.0, n_empty_episodes);
+                    return Err(ActorError::NoProgress { actor_id, n_episodes });
+                }
+                n_empty_episodes += 1;
+                self.start_episode()?;
+            }
+            self.step()?;
+        }
+    }
+
+    /// A full chunk once `chunk_steps + 1` records are buffered, or the rest of an episode that
+    /// has ended (then the episode is finished). `None` if neither.
+    fn take_ready_chunk(&mut self) -> Option<Chunk> {
+        let end_flags = self.episode.as_ref()?.end_flags;
+        let n_records = self.buffer.n_records();
+        if n_records > self.chunk_steps {
+            return self.cut_chunk(self.chunk_steps, 0);
+        }
+        let flags = end_flags?;
+        let chunk = if n_records > 0 { self.cut_chunk(n_records, flags) } else { None };
+        self.finish_episode();
+        chunk
+    }
+
+    fn cut_chunk(&mut self, n_records: usize, mut flags: u32) -> Option<Chunk> {
+        let episode = self.episode.as_mut()?;
+        if episode.next_chunk_index == 0 {
+            flags |= TrajectoryFlags::EPISODE_START;
+        }
+        let cut = self.buffer.cut(n_records, self.stats.policy_version);
+        let mut header = header_for(&self.header_template, &cut, episode.next_chunk_index, flags);
+        header.episode_id = episode.id;
+        header.phi_version = self.stats.phi_version;
+        episode.next_chunk_index += 1;
+        Some(Chunk { header, records: cut.records })
+    }
+
+    fn start_episode(&mut self) -> Result<(), ActorError> {
+        let index = self.n_episodes_started;
+        let id = episode_id(self.actor_id, index)
+            .ok_or(ActorError::EpisodeIdsExhausted { actor_id: self.actor_id.0, n_episodes: index })?;
+        self.n_episodes_started += 1;
+        let reset = self.rollout.env.reset(env_seed(self.seed, self.actor_id, index));
+        let phi = self.rollout.nets.phi_rows(&reset.obs, 1)?;
+        let source = SubgoalSource::for_training_episode(index, self.random_episodes);
+        self.episode = Some(Episode::new(id, source, reset, phi));
+        Ok(())
+    }
+
+    fn step(&mut self) -> Result<(), ActorError> {
+        let Some(episode) = self.episode.as_mut() else {
+            return Ok(());
+        };
+        let env_step = u64::from(episode.t);
+        let outcome = episode.step(&mut self.rollout)?;
+        self.stats.env_steps += 1;
+        match outcome {
+            StepOutcome::Recorded(_) => self.buffer.push(&self.rollout.record, env_step, self.stats.policy_version),
+            StepOutcome::PhysicsFailure => tracing::warn!(
+                actor = self.actor_id.0,
+                episode = episode.id.0,
+                env_step,
+                "physics failure: step not recorded, episode ended"
+            ),
+        }
+        Ok(())
+    }
+
+    fn finish_episode(&mut self) {
+        if let Some(episode) = self.episode.take() {
+            self.stats.episodes += 1;
+            self.stats.last_episode_return = episode.episode_return;
+            self.stats.last_episode_success = episode.success;
+            tracing::debug!(
+                actor = self.actor_id.0,
+                episode = episode.id.0,
+                steps = episode.t,
+                episode_return = episode.episode_return,
+                success = episode.success,
+                "episode finished"
+            );
+        }
+    }
+
+    /// Checks `header` (protocol version, layout hash, length), loads the actor-side weights
+    /// and relabels the φ values of the running episode. A rejected message is an
+    /// [`ActorError::WeightsRejected`], changes nothing and is counted.
+    pub fn load_weights(&mut self, header: &WeightsHeader, bytes: &[u8]) -> Result<(), ActorError> {
+        let loaded = header
+            .check(self.layout_hash(), bytes.len())
+            .map_err(WeightsRejection::from)
+            .and_then(|()| self.rollout.nets.load(bytes));
+        if let Err(reason) = loaded {
+            self.stats.n_weights_rejected += 1;
+            tracing::warn!(actor = self.actor_id.0, policy_version = header.policy_version.0, %reason, "weights rejected");
+            return Err(ActorError::WeightsRejected {
+                policy_version: header.policy_version.0,
+                phi_version: header.phi_version.0,
+                reason,
+            });
+        }
+        self.stats.policy_version = header.policy_version;
+        self.stats.phi_version = header.phi_version;
+        if let Some(episode) = self.episode.as_mut() {
+            episode.relabel_phi(&mut self.rollout.nets, &self.rollout.writer, self.buffer.records_mut())?;
+        }
+        Ok(())
+    }
+
+    /// Counters for metrics.
+    pub fn stats(&self) -> ActorStats {
+        ActorStats { n_physics_failures: self.rollout.env.n_physics_failures(), ..self.stats }
+    }
+}
+
+/// The env's action bound, which must be the same symmetric `[−b, b]` in every dimension (the
+/// low policy squashes to one scale).
+fn symmetric_action_bound(spec: &EnvSpec) -> Result<f32, ActorError> {
+    let bound = spec.action_high.first().copied().unwrap_or(0.0);
+    let symmetric = spec.action_high.iter().all(|h| *h == bound) && spec.action_low.iter().all(|l| *l == -bound);
+    if symmetric && bound.is_finite() && bound > 0.0 {
+        Ok(bound)
+    } else {
+        Err(ActorError::TaskMismatch {
+            task: spec.name.clone(),
+            reason: format!(
+                "action bounds low {:?} / high {:?} are not one symmetric [-b, b]; the low policy needs that",
+                spec.action_low, spec.action_high
+            ),
+        })
+    }
+}
+
+/// Stepping parameters; `env.episode_length` may shorten the task's episodes but not lengthen
+/// them (`envs::registry::make` builds the task with its own length).
+fn rollout_params(config: &Config, spec: &EnvSpec) -> Result<RolloutParams, ActorError> {
+    let episode_length = config.env.episode_length.unwrap_or(spec.max_steps);
+    if episode_length > spec.max_steps {
+        return Err(ActorError::TaskMismatch {
+            task: spec.name.clone(),
+            reason: format!(
+                "env.episode_length = {episode_length} exceeds the task's own length {}; use at most {}",
+                spec.max_steps, spec.max_steps
+            ),
+        });
+    }
+    if spec.goal_dim != 2 {
+        return Err(ActorError::TaskMismatch {
+            task: spec.name.clone(),
+            reason: format!("goal_dim = {}, but the env API's goals are 2-D", spec.goal_dim),
+        });
+    }
+    let deterministic = &config.learner.low.deterministic;
+    Ok(RolloutParams {
+        c: config.hierarchy.c,
+        abs_range: config.hierarchy.abs_range as f32,
+        episode_length,
+        noise: DeterministicNoise {
+            noise_scale: deterministic.noise_scale as f32,
+            random_eps: deterministic.random_eps,
+        },
+        action_low: spec.action_low.clone(),
+        action_high: spec.action_high.clone(),
+    })
+}

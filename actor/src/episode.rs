@@ -1,0 +1,214 @@
+//! One training episode as a state machine: the high level decides every c steps, the low level
+//! acts every step, and each step becomes one record (SPEC §6.1).
+//!
+//! Invariants:
+//! - `phi` is φ(`obs`) under the acting φ version; each step computes φ(s_{t+1}) once and it
+//!   becomes the next step's `phi` (the record's `next_phi` of step t equals `phi` of t+1).
+//! - `subgoal = φ(decision_obs) + delta`, where `decision_obs` and `delta` are those of the last
+//!   decision; when a new φ arrives mid-segment the subgoal is re-anchored in the new φ-space
+//!   with the same delta ([`Episode::relabel_phi`]).
+//! - A step whose physics failed is not recorded; it ends the episode with
+//!   `EPISODE_END | TERMINATED | PHYSICS_FAILURE`.
+
+use envs::api::{Env, Reset, Step};
+use protocol::{DecisionKind, EpisodeId, TrajectoryFlags};
+use rand_pcg::Pcg64Mcg;
+
+use crate::error::ActorError;
+use crate::exploration::{clip, low_action, DeterministicNoise};
+use crate::networks::ActorNets;
+use crate::record::{RecordWriter, StepFields};
+use crate::subgoal::{DecisionInputs, SubgoalSource};
+
+/// Fixed per-run parameters of stepping.
+#[derive(Debug, Clone)]
+pub(crate) struct RolloutParams {
+    /// High-level interval c (env steps).
+    pub c: u32,
+    /// Half-width of the high action box.
+    pub abs_range: f32,
+    /// Steps after which the actor truncates an episode (≤ the env's own `max_steps`).
+    pub episode_length: u32,
+    /// Noise of the deterministic low-level variant.
+    pub noise: DeterministicNoise,
+    /// Env action bounds.
+    pub action_low: Vec<f32>,
+    pub action_high: Vec<f32>,
+}
+
+/// Everything a step uses besides the episode's own state.
+pub(crate) struct Rollout {
+    pub env: Box<dyn Env>,
+    pub nets: ActorNets,
+    pub rng: Pcg64Mcg,
+    pub writer: RecordWriter,
+    pub params: RolloutParams,
+    /// Scratch: the low-level action.
+    pub action: Vec<f32>,
+    /// Scratch: zeros of latent length (high action on non-decision steps).
+    pub zeros: Vec<f32>,
+    /// Scratch: the record being written.
+    pub record: Vec<f32>,
+}
+
+/// What a step produced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum StepOutcome {
+    /// A record was written to `Rollout::record`; `Some(flags)` if the episode ended with it.
+    Recorded(Option<u32>),
+    /// The physics failed: nothing recorded, the episode is over.
+    PhysicsFailure,
+}
+
+/// State of the running episode.
+#[derive(Debug, Clone)]
+pub(crate) struct Episode {
+    /// Run-unique id.
+    pub id: EpisodeId,
+    /// How this episode's subgoals are chosen.
+    pub source: SubgoalSource,
+    /// Env steps taken so far (= episode step index of the next step).
+    pub t: u32,
+    /// Index of the next chunk to cut.
+    pub next_chunk_index: u32,
+    /// `TrajectoryFlags` of the end, once the episode has ended.
+    pub end_flags: Option<u32>,
+    /// Sum of recorded rewards.
+    pub episode_return: f32,
+    /// The env reported success on some recorded step.
+    pub success: bool,
+    obs: Vec<f32>,
+    phi: Vec<f32>,
+    goal: Vec<f32>,
+    subgoal: Vec<f32>,
+    decision_obs: Vec<f32>,
+    delta: Vec<f32>,
+}
+
+impl Episode {
+    /// An episode starting from `reset`, with φ(s_0) = `phi`.
+    pub fn new(id: EpisodeId, source: SubgoalSource, reset: Reset, phi: Vec<f32>) -> Self {
+        let latent = phi.len();
+        Self {
+            id,
+            source,
+            t: 0,
+            next_chunk_index: 0,
+            end_flags: None,
+            episode_return: 0.0,
+            success: false,
+            decision_obs: reset.obs.clone(),
+            obs: reset.obs,
+            goal: reset.goal.to_vec(),
+            subgoal: phi.clone(),
+            phi,
+            delta: vec![0.0; latent],
+        }
+    }
+
+    /// Takes one env step; on `Recorded` the record is in `rollout.record`.
+    pub fn step(&mut self, rollout: &mut Rollout) -> Result<StepOutcome, ActorError> {
+        let decision = self.decide_if_due(rollout)?;
+        self.choose_action(rollout)?;
+        let step = rollout.env.step(&rollout.action)?;
+        self.t += 1;
+        if step.info.physics_failure {
+            let flags = TrajectoryFlags::EPISODE_END | TrajectoryFlags::TERMINATED | TrajectoryFlags::PHYSICS_FAILURE;
+            self.end_flags = Some(flags);
+            return Ok(StepOutcome::PhysicsFailure);
+        }
+        let next_phi = rollout.nets.phi_rows(&step.obs, 1)?;
+        let truncated = step.truncated || self.t >= rollout.params.episode_length;
+        self.write_record(rollout, &step, &next_phi, decision, truncated)?;
+        self.episode_return += step.reward;
+        self.success |= step.info.success;
+        self.obs = step.obs;
+        self.phi = next_phi;
+        if step.terminated || truncated {
+            let mut flags = TrajectoryFlags::EPISODE_END;
+            flags |= if step.terminated { TrajectoryFlags::TERMINATED } else { 0 };
+            flags |= if truncated { TrajectoryFlags::TRUNCATED } else { 0 };
+            self.end_flags = Some(flags);
+        }
+        Ok(StepOutcome::Recorded(self.end_flags))
+    }
+
+    /// At t mod c = 0: a new delta from the episode's source and `subgoal = φ(s_t) + delta`.
+    fn decide_if_due(&mut self, rollout: &mut Rollout) -> Result<DecisionKind, ActorError> {
+        if self.t % rollout.params.c != 0 {
+            return Ok(DecisionKind::None);
+        }
+        let inputs = DecisionInputs { obs: &self.obs, goal: &self.goal, abs_range: rollout.params.abs_range };
+        self.source.decide(&inputs, &mut rollout.nets, &mut rollout.rng, &mut self.delta)?;
+        self.decision_obs.copy_from_slice(&self.obs);
+        for ((sg, phi), delta) in self.subgoal.iter_mut().zip(&self.phi).zip(&self.delta) {
+            *sg = phi + delta;
+        }
+        Ok(self.source.decision_kind())
+    }
+
+    /// The low level's exploratory action on `[obs, φ(obs), subgoal]`, clipped to the env
+    /// bounds, into `rollout.action`.
+    fn choose_action(&self, rollout: &mut Rollout) -> Result<(), ActorError> {
+        let head = rollout.nets.low_head(&self.obs, &self.phi, &self.subgoal)?;
+        low_action(&head, rollout.params.noise, &mut rollout.rng, &mut rollout.action);
+        let params = &rollout.params;
+        clip(&mut rollout.action, &params.action_low, &params.action_high);
+        Ok(())
+    }
+
+    fn write_record(
+        &self,
+        rollout: &mut Rollout,
+        step: &Step,
+        next_phi: &[f32],
+        decision: DecisionKind,
+        truncated: bool,
+    ) -> Result<(), ActorError> {
+        let high_action = if decision.is_decision() { &self.delta } else { &rollout.zeros };
+        let fields = StepFields {
+            obs: &self.obs,
+            next_obs: &step.obs,
+            phi: &self.phi,
+            next_phi,
+            subgoal: &self.subgoal,
+            high_action,
+            action: &rollout.action,
+            goal: &self.goal,
+            achieved_goal: &step.info.achieved_goal,
+            reward: step.reward,
+            decision,
+            success: step.info.success,
+            terminated: step.terminated,
+            truncated,
+        };
+        rollout.writer.write(&fields, &mut rollout.record).map_err(|bad| ActorError::NonFinite {
+            field: bad.field,
+            index: bad.index,
+            value: bad.value,
+        })
+    }
+
+    /// Recomputes every φ-dependent value under new encoder weights: `phi`, the re-anchored
+    /// `subgoal`, and the φ fields of the not-yet-cut `records` (which belong to the current
+    /// segment: see the buffer invariant in [`crate::chunk`]).
+    pub fn relabel_phi<'r>(
+        &mut self,
+        nets: &mut ActorNets,
+        writer: &RecordWriter,
+        records: impl Iterator<Item = &'r mut [f32]>,
+    ) -> Result<(), ActorError> {
+        let latent = self.phi.len();
+        let fresh = nets.phi_rows(&[&self.obs[..], &self.decision_obs[..]].concat(), 2)?;
+        self.phi.copy_from_slice(&fresh[..latent]);
+        for ((sg, phi_d), delta) in self.subgoal.iter_mut().zip(&fresh[latent..]).zip(&self.delta) {
+            *sg = phi_d + delta;
+        }
+        for record in records {
+            let rows = [writer.obs(record), writer.next_obs(record)].concat();
+            let phis = nets.phi_rows(&rows, 2)?;
+            writer.relabel(record, &phis[..latent], &phis[latent..], &self.subgoal);
+        }
+        Ok(())
+    }
+}
