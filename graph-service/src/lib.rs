@@ -1,1 +1,33 @@
-//! graph-service crate.
+//! The graph-service of ASI as a transport-agnostic state machine (SPEC §3, §6.5–6.7): no I/O
+//! and no threads; the `asi graph-service` binary wires [`GraphService`] to iceoryx2, and
+//! serial mode and tests call it directly.
+//!
+//! - [`store`]: trajectory store (per episode, in order), bounded, oldest episodes evicted first.
+//! - [`grid`]: cells of side d in φ-space, keys by floor division, node positions.
+//! - [`graph`]: the latent graph of Eq. 8 (min temporal distance within `edge_window`).
+//! - [`dijkstra`]: shortest paths with path recovery.
+//! - [`frontier`]: frontier choice, routes, SI route queries with the frontier fallback.
+//! - [`counts`]: visit counts n(v) (Eq. 10) and the least-visited candidate.
+//! - [`phi`]: the encoder φ loaded from weights messages; batched re-mapping of the store.
+//! - [`server`]: [`GraphService::handle`], the request handler.
+//! - [`service`]: [`GraphService`] itself: ingest, weights, rebuild, queries, stats.
+//!
+//! Invariants: bad input (chunks, weights, requests) is refused with a reason and counted,
+//! never a panic, and leaves the state unchanged.
+
+pub mod counts;
+pub mod dijkstra;
+pub mod error;
+pub mod frontier;
+pub mod graph;
+pub mod grid;
+pub mod phi;
+pub mod server;
+pub mod service;
+pub mod store;
+
+pub use error::GraphServiceError;
+pub use frontier::{Frontier, NoRoute};
+pub use graph::{LatentGraph, NodeId};
+pub use grid::{CellKey, Grid};
+pub use service::{GraphService, GraphStats};
