@@ -7,17 +7,31 @@ use clap::{Args, Parser, Subcommand};
 #[derive(Debug, Parser)]
 #[command(name = "asi", version, about)]
 pub struct Cli {
+    /// Without a subcommand, `asi` runs `asi train` on the default config.
     #[command(subcommand)]
-    pub command: Command,
+    pub command: Option<Command>,
 }
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Train an agent: launches graph-service, learner and actors and supervises them.
+    Train(TrainArgs),
+    /// (spawned by `asi train`) The learner process.
+    #[command(hide = true)]
+    Learner(ChildArgs),
+    /// (spawned by `asi train`) An actor process.
+    #[command(hide = true)]
+    Actor(ActorArgs),
+    /// (spawned by `asi train`) The graph-service process.
+    #[command(hide = true, name = "graph-service")]
+    GraphService(ChildArgs),
     /// Measure throughput of a part of the system.
     #[command(subcommand)]
     Bench(BenchCommand),
     /// List the registered task names.
     Tasks,
+    /// Query the live graph-service of a running training run.
+    Graph(GraphArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -40,4 +54,66 @@ pub struct BenchEnvArgs {
     /// Seed of the random actions and resets.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+}
+
+#[derive(Debug, Default, Args)]
+pub struct TrainArgs {
+    /// TOML config file; without it, the embedded defaults (AntMaze-U, the paper's setting).
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
+    /// Override one config value, e.g. `--set learner.high.lr=1e-4` (repeatable; applied after
+    /// the file, in order).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Number of actor processes (overrides `run.n_actors`; default: cores − 2, at least 1).
+    #[arg(long)]
+    pub actors: Option<usize>,
+    /// Run folder (default `<run.root_dir>/<run.name>`, i.e. `runs/antmaze-u`).
+    #[arg(long)]
+    pub run_dir: Option<std::path::PathBuf>,
+    /// Master seed (overrides `run.seed`).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Run every component in this one process, in a fixed order, with no transport:
+    /// deterministic for a seed (for debugging and tests).
+    #[arg(long)]
+    pub serial: bool,
+}
+
+/// Arguments every child process gets from the launcher.
+#[derive(Debug, Args)]
+pub struct ChildArgs {
+    /// The run folder holding `config.resolved.toml`.
+    #[arg(long)]
+    pub run_dir: std::path::PathBuf,
+    /// The run id; must match the run folder's (refuses processes of another run).
+    #[arg(long)]
+    pub run_id: String,
+}
+
+#[derive(Debug, Args)]
+pub struct ActorArgs {
+    #[command(flatten)]
+    pub child: ChildArgs,
+    /// This actor's index (0-based).
+    #[arg(long)]
+    pub actor_id: u32,
+    /// How many times the launcher restarted this actor.
+    #[arg(long, default_value_t = 0)]
+    pub incarnation: u32,
+}
+
+#[derive(Debug, Args)]
+pub struct GraphArgs {
+    /// Run folder of a running `asi train`.
+    #[arg(long)]
+    pub run_dir: std::path::PathBuf,
+    #[command(subcommand)]
+    pub command: GraphCommand,
+}
+
+#[derive(Debug, Clone, Copy, Subcommand)]
+pub enum GraphCommand {
+    /// Graph size and trajectory store counts.
+    Stats,
 }

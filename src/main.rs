@@ -2,7 +2,13 @@
 //! errors to an exit code with the whole error chain printed.
 
 mod bench;
+mod channels;
 mod cli;
+mod graph_tool;
+mod launcher;
+mod proc;
+mod run;
+mod serial;
 
 use std::process::ExitCode;
 
@@ -12,6 +18,13 @@ use cli::{Cli, Command};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // One numeric thread per process unless the user says otherwise (SPEC §3): with two
+    // cores, several processes each spawning a rayon pool would fight over them.
+    if std::env::var_os("RAYON_NUM_THREADS").is_none() {
+        std::env::set_var("RAYON_NUM_THREADS", "1");
+    }
+    // iceoryx2 warns on every start that it runs on its built-in defaults; only errors matter.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     init_tracing();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -23,8 +36,23 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command {
+    match cli.command.unwrap_or_else(|| Command::Train(cli::TrainArgs::default())) {
+        Command::Train(args) => {
+            let ctx = launcher::prepare(&args)?;
+            if args.serial {
+                serial::run(ctx)
+            } else {
+                launcher::run(ctx)
+            }
+        }
+        Command::Learner(args) => proc::learner::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
+        Command::GraphService(args) => proc::graph_service::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
+        Command::Actor(args) => {
+            let ctx = run::RunContext::open(&args.child.run_dir, &args.child.run_id)?;
+            proc::actor::run(&ctx, &proc::actor::ActorArgs { actor_id: args.actor_id, incarnation: args.incarnation })
+        }
         Command::Bench(args) => bench::run(args),
+        Command::Graph(args) => graph_tool::run(&args),
         Command::Tasks => {
             for name in envs::registry::task_names() {
                 println!("{name}");

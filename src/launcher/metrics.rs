@@ -1,0 +1,157 @@
+//! The launcher's view of the run: the latest value of every metric from every process,
+//! written to `metrics.jsonl` (one object per flush, all values) and `metrics.csv` (headline
+//! columns), and shown as one progress line. Metric names are documented in `docs/METRICS.md`.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, IsTerminal, Write};
+use std::time::{Duration, Instant};
+
+use indicatif::{ProgressBar, ProgressStyle};
+use protocol::{Config, MetricsSample, ProcessRole};
+
+use crate::run::RunContext;
+
+/// Headline columns of `metrics.csv`, each the key of a value in the book.
+const CSV_COLUMNS: [&str; 7] = [
+    "learner/ingest/env_steps",
+    "learner/ingest/episodes",
+    "learner/learner/updates_low",
+    "learner/learner/updates_high",
+    "learner/learner/policy_version",
+    "learner/ingest/lost_chunks",
+    "graph-service/graph/stored_steps",
+];
+/// How often a plain progress line is logged when stderr is not a terminal.
+const PLAIN_PROGRESS_INTERVAL: Duration = Duration::from_secs(10);
+
+pub struct MetricsBook {
+    values: BTreeMap<String, f64>,
+    started: Instant,
+    jsonl: BufWriter<File>,
+    csv: BufWriter<File>,
+    bar: ProgressBar,
+    last_plain: Instant,
+    rate: RateMeter,
+}
+
+impl MetricsBook {
+    pub fn create(ctx: &RunContext) -> anyhow::Result<Self> {
+        let jsonl = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
+        let mut csv = BufWriter::new(File::create(ctx.run_dir.join("metrics.csv"))?);
+        writeln!(csv, "wall_secs,env_steps_per_sec,actor_restarts,{}", CSV_COLUMNS.join(","))?;
+        let bar = if std::io::stderr().is_terminal() { ProgressBar::new_spinner() } else { ProgressBar::hidden() };
+        bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").unwrap_or_else(|_| ProgressStyle::default_spinner()));
+        bar.enable_steady_tick(Duration::from_millis(200));
+        Ok(Self {
+            values: BTreeMap::new(),
+            started: Instant::now(),
+            jsonl,
+            csv,
+            bar,
+            last_plain: Instant::now(),
+            rate: RateMeter::default(),
+        })
+    }
+
+    /// Keeps the latest value per `<process>/<name>`; malformed samples are logged and skipped.
+    pub fn record(&mut self, samples: &[MetricsSample]) {
+        for sample in samples {
+            match key_of(sample) {
+                Ok(key) => {
+                    self.values.insert(key, sample.value);
+                }
+                Err(err) => tracing::warn!("skipped a metrics sample: {err:#}"),
+            }
+        }
+        self.rate.observe(self.get("learner/ingest/env_steps"));
+    }
+
+    fn get(&self, key: &str) -> f64 {
+        self.values.get(key).copied().unwrap_or(0.0)
+    }
+
+    pub fn budget_reached(&self, config: &Config) -> bool {
+        let steps = self.get("learner/ingest/env_steps") as u64;
+        let episodes = self.get("learner/ingest/episodes") as u64;
+        config.run.max_env_steps.is_some_and(|max| steps >= max) || episodes >= config.run.max_episodes
+    }
+
+    pub fn show_progress(&mut self, restarts: u64) {
+        let line = format!(
+            "env steps {} | {:.0} steps/s | episodes {} | eval success - | policy v{} | restarts {restarts}",
+            self.get("learner/ingest/env_steps") as u64,
+            self.rate.per_sec(),
+            self.get("learner/ingest/episodes") as u64,
+            self.get("learner/learner/policy_version") as u64,
+        );
+        if self.bar.is_hidden() {
+            if self.last_plain.elapsed() >= PLAIN_PROGRESS_INTERVAL {
+                tracing::info!("{line}");
+                self.last_plain = Instant::now();
+            }
+        } else {
+            self.bar.set_message(line);
+        }
+    }
+
+    /// Appends one line to each metrics file.
+    pub fn flush(&mut self, restarts: u64) -> anyhow::Result<()> {
+        let wall = self.started.elapsed().as_secs_f64();
+        let mut object = serde_json::Map::new();
+        object.insert("wall_secs".to_owned(), serde_json::json!(wall));
+        object.insert("launcher/env_steps_per_sec".to_owned(), serde_json::json!(self.rate.per_sec()));
+        object.insert("launcher/actor_restarts".to_owned(), serde_json::json!(restarts));
+        for (key, value) in &self.values {
+            object.insert(key.clone(), serde_json::json!(value));
+        }
+        writeln!(self.jsonl, "{}", serde_json::Value::Object(object))?;
+        let columns: Vec<String> = CSV_COLUMNS.iter().map(|k| self.get(k).to_string()).collect();
+        writeln!(self.csv, "{wall:.3},{:.1},{restarts},{}", self.rate.per_sec(), columns.join(","))?;
+        self.jsonl.flush()?;
+        self.csv.flush()?;
+        Ok(())
+    }
+
+    pub fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+/// `learner/<name>`, `graph-service/<name>`, `actor3/<name>`, …
+fn key_of(sample: &MetricsSample) -> anyhow::Result<String> {
+    let name = sample.name()?;
+    let process = match sample.role()? {
+        ProcessRole::Launcher => "launcher".to_owned(),
+        ProcessRole::Learner => "learner".to_owned(),
+        ProcessRole::GraphService => "graph-service".to_owned(),
+        ProcessRole::Actor => format!("actor{}", sample.source_id),
+        ProcessRole::Evaluator => format!("evaluator{}", sample.source_id),
+    };
+    Ok(format!("{process}/{name}"))
+}
+
+/// Env steps per second over a sliding window of recent observations.
+#[derive(Default)]
+struct RateMeter {
+    window: Vec<(Instant, f64)>,
+}
+
+impl RateMeter {
+    const SPAN: Duration = Duration::from_secs(10);
+
+    fn observe(&mut self, steps: f64) {
+        let now = Instant::now();
+        if self.window.last().is_none_or(|&(_, s)| s != steps) {
+            self.window.push((now, steps));
+        }
+        self.window.retain(|&(t, _)| now.duration_since(t) <= Self::SPAN);
+    }
+
+    fn per_sec(&self) -> f64 {
+        match (self.window.first(), self.window.last()) {
+            (Some(&(t0, s0)), Some(&(t1, s1))) if t1 > t0 => (s1 - s0) / t1.duration_since(t0).as_secs_f64(),
+            _ => 0.0,
+        }
+    }
+}

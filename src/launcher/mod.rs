@@ -1,0 +1,149 @@
+//! `asi train`: resolves the config once, spawns graph-service, learner and actors as separate
+//! processes, supervises them (a crashed actor comes back with back-off), shows progress,
+//! writes metrics, and stops everything cleanly on Ctrl-C, SIGTERM or when the budget is spent.
+//!
+//! Shutdown order matters for "nothing lost": actors stop first (SIGTERM; they finish the chunk
+//! in hand), then the learner and graph-service get a Stop message and drain what the actors
+//! sent before they exit.
+
+mod children;
+mod metrics;
+
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use iceoryx2::prelude::*;
+use protocol::{ControlCommand, ControlMessage};
+
+use crate::channels::Channels;
+use crate::proc::common::{node, task_dims};
+use crate::run::RunContext;
+use children::{ChildKind, Children};
+use metrics::MetricsBook;
+
+/// Supervisor tick: how often children and metrics are checked.
+const TICK: Duration = Duration::from_millis(100);
+/// How long learner and graph-service may take to drain and exit after a Stop message.
+const SERVICE_STOP_WAIT: Duration = Duration::from_secs(10);
+/// How long service processes may take to open their channels.
+const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Why the supervisor loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ending {
+    BudgetReached,
+    Signal,
+}
+
+pub fn run(ctx: RunContext) -> anyhow::Result<()> {
+    let config = &ctx.config;
+    let (_, layout) = task_dims(config)?;
+    let node = node(&ctx, "launcher")?;
+    clean_stale_resources(&node);
+    let channels = Channels::new(config, &ctx.run_id, &layout);
+    let metrics_in = channels.metrics_subscriber(&node)?;
+    let control = channels.control_publisher(&node)?;
+    let mut book = MetricsBook::create(&ctx)?;
+    let mut children = Children::new(&ctx)?;
+    children.spawn(ChildKind::GraphService)?;
+    children.spawn(ChildKind::Learner)?;
+    wait_until_ready(&ctx, &node, &mut children)?;
+    for id in 0..config.run.n_actors as u32 {
+        children.spawn(ChildKind::Actor(id))?;
+    }
+    tracing::info!(run_id = %ctx.run_id, run_dir = %ctx.run_dir.display(), actors = config.run.n_actors, "training started");
+    let ending = supervise(&ctx, &node, &metrics_in, &mut children, &mut book);
+    shutdown(&control, &mut children);
+    let drained = metrics_in.drain().unwrap_or_default();
+    book.record(&drained);
+    book.flush(children.total_restarts())?;
+    book.finish();
+    clean_stale_resources(&node);
+    match ending? {
+        Ending::BudgetReached => tracing::info!("training budget reached; run finished"),
+        Ending::Signal => tracing::info!("stopped by signal; run folder {}", ctx.run_dir.display()),
+    }
+    Ok(())
+}
+
+/// Removes iceoryx2 resources of dead nodes (e.g. processes SIGKILLed in an earlier run).
+fn clean_stale_resources(node: &Node<protocol::transport::Ipc>) {
+    let state = node.try_cleanup_dead_nodes();
+    tracing::debug!(?state, "cleaned iceoryx2 resources of dead nodes");
+}
+
+fn wait_until_ready(ctx: &RunContext, node: &Node<protocol::transport::Ipc>, children: &mut Children) -> anyhow::Result<()> {
+    let start = Instant::now();
+    while !(ctx.is_ready("learner") && ctx.is_ready("graph-service")) {
+        if node.wait(TICK).is_err() {
+            bail!("interrupted while starting");
+        }
+        if let Some(failure) = children.check_services()? {
+            bail!(failure);
+        }
+        if start.elapsed() > STARTUP_TIMEOUT {
+            bail!("learner or graph-service not ready after {STARTUP_TIMEOUT:?}; see {}/logs/", ctx.run_dir.display());
+        }
+    }
+    Ok(())
+}
+
+fn supervise(
+    ctx: &RunContext,
+    node: &Node<protocol::transport::Ipc>,
+    metrics_in: &protocol::transport::ValueSubscriber<protocol::MetricsSample>,
+    children: &mut Children,
+    book: &mut MetricsBook,
+) -> anyhow::Result<Ending> {
+    let interval = Duration::from_secs_f64(ctx.config.run.metrics_interval_secs);
+    let mut last_flush = Instant::now();
+    loop {
+        if node.wait(TICK).is_err() {
+            return Ok(Ending::Signal);
+        }
+        book.record(&metrics_in.drain()?);
+        if let Some(failure) = children.check_services()? {
+            bail!(failure);
+        }
+        children.restart_crashed_actors()?;
+        book.show_progress(children.total_restarts());
+        if last_flush.elapsed() >= interval {
+            book.flush(children.total_restarts())?;
+            last_flush = Instant::now();
+        }
+        if book.budget_reached(&ctx.config) {
+            return Ok(Ending::BudgetReached);
+        }
+    }
+}
+
+/// Actors first (so everything they sent can be drained), then the services: a Stop message,
+/// and SIGTERM for any that has not exited after [`SERVICE_STOP_WAIT`].
+fn shutdown(control: &protocol::transport::ValuePublisher<ControlMessage>, children: &mut Children) {
+    children.stop_kind(|k| matches!(k, ChildKind::Actor(_)));
+    if let Err(err) = control.send(ControlMessage::new(1, ControlCommand::Stop)) {
+        tracing::warn!("could not send Stop: {err:#}");
+    }
+    if !children.wait_for_exit(|_| true, SERVICE_STOP_WAIT) {
+        tracing::warn!("services did not stop on the Stop message; sending SIGTERM");
+    }
+    children.stop_kind(|_| true);
+}
+
+/// Resolves `asi train`'s arguments into a run context (writes the resolved config).
+pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
+    let mut overrides = args.set.clone();
+    if let Some(seed) = args.seed {
+        overrides.push(format!("run.seed={seed}"));
+    }
+    if let Some(actors) = args.actors {
+        overrides.push(format!("run.n_actors={actors}"));
+    }
+    let config = protocol::Config::load(args.config.as_deref(), &overrides)
+        .with_context(|| match &args.config {
+            Some(path) => format!("loading config {}", path.display()),
+            None => "loading the default config (AntMaze-U)".to_owned(),
+        })?;
+    let run_dir = args.run_dir.clone().unwrap_or_else(|| config.run.run_dir());
+    RunContext::create(config, run_dir)
+}

@@ -1,0 +1,156 @@
+//! `asi learner`: ingests trajectory chunks from every actor, trains at the configured replay
+//! ratio, publishes versioned weights and the throttle state. Sleeps on its channels' events
+//! when it has nothing to do.
+
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use iceoryx2::prelude::*;
+use learner::Learner;
+use protocol::transport::{Ipc, ValuePublisher};
+use protocol::{ControlCommand, ProcessRole, ProgressMessage, PROTOCOL_VERSION};
+
+use super::common::{node, task_dims, MetricsOut, StopWatch};
+use crate::channels::{Channels, WeightsPublisher};
+use crate::run::RunContext;
+
+/// Sleep when idle; events (chunks, control) wake the learner earlier.
+const IDLE_WAIT: Duration = Duration::from_millis(50);
+/// Updates per loop iteration, so new chunks are ingested between bursts of training.
+const UPDATES_PER_TICK: usize = 8;
+/// How often publishers hand their history (latest weights, progress) to new subscribers.
+const RECONNECT_INTERVAL: Duration = Duration::from_millis(500);
+
+pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
+    let config = &ctx.config;
+    let (dims, layout) = task_dims(config)?;
+    let mut learner = Learner::new(config, dims, config.run.seed).context("building the learner")?;
+    let node = node(ctx, "learner")?;
+    let channels = Channels::new(config, &ctx.run_id, &layout);
+    let trajectories = channels.trajectory_subscriber(&node)?;
+    let control = channels.control_subscriber(&node)?;
+    let progress = channels.progress_publisher(&node)?;
+    let mut weights: Option<WeightsPublisher> = None;
+    let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Learner, 0, config);
+    let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
+    let _chunks = waitset.attach_notification(trajectories.listener()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let _control = waitset.attach_notification(control.listener()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let stop = StopWatch::new();
+    publish_weights(&mut learner, &channels, &node, &mut weights)?;
+    send_progress(&progress, &learner)?;
+    ctx.mark_ready("learner")?;
+    let mut last_reconnect = Instant::now();
+    let mut busy = false;
+    let reason = loop {
+        let timeout = if busy { Duration::ZERO } else { IDLE_WAIT };
+        let _ = waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout);
+        if let Some(reason) = stop.should_stop(&node).or_else(|| stop_requested(&control)) {
+            break reason;
+        }
+        ingest_all(&mut learner, &trajectories);
+        busy = learner.train(UPDATES_PER_TICK)? > 0;
+        publish_weights(&mut learner, &channels, &node, &mut weights)?;
+        send_progress(&progress, &learner)?;
+        if last_reconnect.elapsed() >= RECONNECT_INTERVAL {
+            reconnect(&progress, weights.as_ref());
+            last_reconnect = Instant::now();
+        }
+        if metrics.due() {
+            metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner));
+        }
+    };
+    // Actors are stopped first; whatever they sent is in our buffer: take it before leaving.
+    ingest_all(&mut learner, &trajectories);
+    metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner));
+    tracing::info!(reason, "learner stopping");
+    write_final_status(ctx, &learner, reason)
+}
+
+fn ingest_all(learner: &mut Learner, trajectories: &crate::channels::TrajectorySubscriber) {
+    let drained = trajectories.drain(|header, payload| {
+        if let Err(err) = learner.ingest(header, payload) {
+            tracing::warn!("rejected a trajectory chunk: {err:#}");
+        }
+    });
+    if let Err(err) = drained {
+        tracing::warn!("receiving trajectories failed: {err:#}");
+    }
+}
+
+fn stop_requested(control: &protocol::transport::ValueSubscriber<protocol::ControlMessage>) -> Option<&'static str> {
+    let messages = control.drain().ok()?;
+    messages.iter().any(|m| m.command() == Ok(ControlCommand::Stop)).then_some("stop requested")
+}
+
+fn publish_weights(
+    learner: &mut Learner,
+    channels: &Channels,
+    node: &Node<Ipc>,
+    weights: &mut Option<WeightsPublisher>,
+) -> anyhow::Result<()> {
+    let Some((header, bytes)) = learner.publish_due()? else { return Ok(()) };
+    if weights.is_none() {
+        *weights = Some(channels.weights_publisher(node, bytes.len())?);
+    }
+    if let Some(publisher) = weights {
+        publisher.send(header, &bytes)?;
+    }
+    Ok(())
+}
+
+fn send_progress(progress: &ValuePublisher<ProgressMessage>, learner: &Learner) -> anyhow::Result<()> {
+    let p = learner.progress();
+    progress.send(ProgressMessage {
+        env_steps_ingested: p.env_steps_ingested,
+        env_step_budget: p.env_step_budget,
+        policy_version: p.policy_version,
+        phi_version: p.phi_version,
+        protocol_version: PROTOCOL_VERSION,
+        reserved: 0,
+    })?;
+    Ok(())
+}
+
+fn reconnect(progress: &ValuePublisher<ProgressMessage>, weights: Option<&WeightsPublisher>) {
+    if let Err(err) = progress.update_connections() {
+        tracing::warn!("progress channel: {err:#}");
+    }
+    if let Some(Err(err)) = weights.map(WeightsPublisher::update_connections) {
+        tracing::warn!("weights channel: {err:#}");
+    }
+}
+
+fn learner_metrics(learner: &Learner) -> Vec<(String, f64)> {
+    let p = learner.progress();
+    let s = learner.ingest_stats();
+    let mut values = vec![
+        ("ingest/env_steps".to_owned(), p.env_steps_ingested as f64),
+        ("ingest/episodes".to_owned(), s.episodes_completed as f64),
+        ("ingest/lost_chunks".to_owned(), s.lost_chunks as f64),
+        ("ingest/duplicate_chunks".to_owned(), s.duplicate_chunks as f64),
+        ("ingest/rejected_chunks".to_owned(), s.rejected_chunks as f64),
+        ("learner/updates_low".to_owned(), p.updates_low as f64),
+        ("learner/updates_high".to_owned(), p.updates_high as f64),
+        ("learner/policy_version".to_owned(), p.policy_version.0 as f64),
+        ("learner/env_step_budget".to_owned(), p.env_step_budget as f64),
+    ];
+    values.extend(learner.metrics().into_iter().map(|(k, v)| (k.to_owned(), v)));
+    values
+}
+
+fn write_final_status(ctx: &RunContext, learner: &Learner, reason: &str) -> anyhow::Result<()> {
+    let p = learner.progress();
+    let s = learner.ingest_stats();
+    let per_actor: serde_json::Map<String, serde_json::Value> =
+        s.per_actor_steps.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v))).collect();
+    ctx.write_status(
+        "learner",
+        &serde_json::json!({
+            "role": "learner", "env_steps": p.env_steps_ingested, "chunks": s.chunks,
+            "episodes": s.episodes_completed, "lost_chunks": s.lost_chunks,
+            "duplicate_chunks": s.duplicate_chunks, "rejected_chunks": s.rejected_chunks,
+            "per_actor_steps": per_actor, "updates_low": p.updates_low, "updates_high": p.updates_high,
+            "policy_version": p.policy_version.0, "stop_reason": reason,
+        }),
+    )
+}

@@ -1,0 +1,105 @@
+//! `asi train --serial`: the same components as the process mode (actors, learner,
+//! graph-service) driven by one loop in one process, with no transport and no clock in the
+//! loop, so a run is deterministic for its seed: two runs with the same config produce
+//! identical `metrics.jsonl` files. Meant for debugging and for tests.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+
+use actor::Actor;
+use anyhow::{bail, Context};
+use graph_service::GraphService;
+use learner::Learner;
+use protocol::ActorId;
+
+use crate::proc::actor::actor_seed;
+use crate::proc::common::task_dims;
+use crate::run::RunContext;
+
+/// Updates per `train` call while catching up with the replay ratio.
+const UPDATE_BURST: usize = 64;
+
+pub fn run(ctx: RunContext) -> anyhow::Result<()> {
+    let config = &ctx.config;
+    let (dims, _) = task_dims(config)?;
+    let seed = config.run.seed;
+    let mut learner = Learner::new(config, dims, seed).context("building the learner")?;
+    let mut graph = GraphService::new(config, dims, seed).context("building the graph-service")?;
+    let mut actors = (0..config.run.n_actors as u32)
+        .map(|id| Actor::new(config, ActorId(id), actor_seed(seed, id, 0)))
+        .collect::<Result<Vec<_>, _>>()
+        .context("building the actors")?;
+    let mut metrics = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
+    broadcast_weights(&mut learner, &mut actors, &mut graph)?;
+    let mut last_episodes = 0;
+    while !budget_reached(config, &learner) {
+        for actor in &mut actors {
+            catch_up(&mut learner)?;
+            let chunk = actor.next_chunk()?;
+            learner.ingest(&chunk.header, &chunk.records)?;
+            graph.ingest(&chunk.header, &chunk.records)?;
+        }
+        catch_up(&mut learner)?;
+        broadcast_weights(&mut learner, &mut actors, &mut graph)?;
+        let episodes = learner.ingest_stats().episodes_completed;
+        if episodes != last_episodes {
+            write_line(&mut metrics, &learner, &graph)?;
+            last_episodes = episodes;
+        }
+    }
+    write_line(&mut metrics, &learner, &graph)?;
+    metrics.flush()?;
+    tracing::info!(env_steps = learner.progress().env_steps_ingested, "serial run finished");
+    Ok(())
+}
+
+fn budget_reached(config: &protocol::Config, learner: &Learner) -> bool {
+    let steps = learner.progress().env_steps_ingested;
+    let episodes = learner.ingest_stats().episodes_completed;
+    config.run.max_env_steps.is_some_and(|max| steps >= max) || episodes >= config.run.max_episodes
+}
+
+/// Runs every update the replay ratio allows, until the throttle lets actors continue.
+fn catch_up(learner: &mut Learner) -> anyhow::Result<()> {
+    while learner.train(UPDATE_BURST)? > 0 {}
+    let p = learner.progress();
+    if p.env_steps_ingested >= p.env_step_budget {
+        bail!(
+            "the throttle blocks the actors ({} env steps ingested, budget {}) but no update is allowed: \
+             check learner.*.updates_* and replay.replay_slack_steps",
+            p.env_steps_ingested,
+            p.env_step_budget
+        );
+    }
+    Ok(())
+}
+
+fn broadcast_weights(learner: &mut Learner, actors: &mut [Actor], graph: &mut GraphService) -> anyhow::Result<()> {
+    if let Some((header, bytes)) = learner.publish_due()? {
+        for actor in actors.iter_mut() {
+            actor.load_weights(&header, &bytes)?;
+        }
+        graph.load_weights(&header, &bytes)?;
+    }
+    Ok(())
+}
+
+/// One JSON object per completed episode; only values that depend on the seed, no clock.
+fn write_line(out: &mut impl Write, learner: &Learner, graph: &GraphService) -> anyhow::Result<()> {
+    let p = learner.progress();
+    let s = learner.ingest_stats();
+    let mut object = serde_json::Map::new();
+    object.insert("learner/ingest/env_steps".to_owned(), serde_json::json!(p.env_steps_ingested));
+    object.insert("learner/ingest/episodes".to_owned(), serde_json::json!(s.episodes_completed));
+    object.insert("learner/learner/updates_low".to_owned(), serde_json::json!(p.updates_low));
+    object.insert("learner/learner/updates_high".to_owned(), serde_json::json!(p.updates_high));
+    object.insert("learner/learner/policy_version".to_owned(), serde_json::json!(p.policy_version.0));
+    for (name, value) in learner.metrics() {
+        if !name.contains("per_sec") {
+            object.insert(format!("learner/{name}"), serde_json::json!(value));
+        }
+    }
+    object.insert("graph-service/graph/stored_steps".to_owned(), serde_json::json!(graph.stats().stored_steps));
+    writeln!(out, "{}", serde_json::Value::Object(object))?;
+    Ok(())
+}
