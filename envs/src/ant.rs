@@ -351,8 +351,7 @@ impl Ant {
         self.world.bodies[torso].set_position(Pose::from_parts(translation, rotation), true);
         let hinges = self.hinges;
         let dof_index = self.dof_index;
-        let multibody = self.multibody_mut_with_bodies();
-        let (multibody, bodies) = multibody;
+        let (multibody, bodies) = self.multibody_mut_with_bodies();
         let mut displacement = vec![0.0; multibody.ndofs()];
         for (joint, hinge) in hinges.iter().enumerate() {
             displacement[dof_index[joint]] =
