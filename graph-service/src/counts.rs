@@ -73,7 +73,10 @@ impl VisitCounts {
 
     /// The candidate with the fewest visits (first on ties) and its count; `Ok(None)` for no
     /// candidates, `Err` at the first candidate whose cell is out of range.
-    pub fn least_visited(&self, candidates: &[LatentPoint]) -> Result<Option<(usize, u64)>, OutOfRange> {
+    pub fn least_visited(
+        &self,
+        candidates: &[LatentPoint],
+    ) -> Result<Option<(usize, u64)>, OutOfRange> {
         let mut best: Option<(usize, u64)> = None;
         for (index, &point) in candidates.iter().enumerate() {
             let visits = self.at(point).ok_or(OutOfRange { index, point })?;
@@ -112,7 +115,10 @@ mod tests {
         c.add(&[[0.0, 0.0], [0.0, 0.0], [2.0, 0.0], [4.0, 0.0]]);
         let candidates = [[0.5, 0.5], [2.5, 0.5], [4.5, 0.5], [0.0, 0.0]];
         assert_eq!(c.least_visited(&candidates), Ok(Some((1, 1))));
-        assert_eq!(c.least_visited(&[[0.0, 0.0], [50.0, 50.0]]), Ok(Some((1, 0))));
+        assert_eq!(
+            c.least_visited(&[[0.0, 0.0], [50.0, 50.0]]),
+            Ok(Some((1, 0)))
+        );
         assert_eq!(c.least_visited(&[]), Ok(None));
     }
 

@@ -50,11 +50,20 @@ pub enum NoRoute {
 impl fmt::Display for NoRoute {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            NoRoute::UnknownStart { point } => write!(f, "start point {point:?} is in no graph node's cell"),
-            NoRoute::UnknownEnd { point } => write!(f, "end point {point:?} is in no graph node's cell"),
-            NoRoute::Unreachable { from, to } => write!(f, "node {to} is not reachable from node {from}"),
+            NoRoute::UnknownStart { point } => {
+                write!(f, "start point {point:?} is in no graph node's cell")
+            }
+            NoRoute::UnknownEnd { point } => {
+                write!(f, "end point {point:?} is in no graph node's cell")
+            }
+            NoRoute::Unreachable { from, to } => {
+                write!(f, "node {to} is not reachable from node {from}")
+            }
             NoRoute::NothingReachable { from } => {
-                write!(f, "no node other than the start node {from} is reachable; no frontier")
+                write!(
+                    f,
+                    "no node other than the start node {from} is reachable; no frontier"
+                )
             }
         }
     }
@@ -72,14 +81,26 @@ pub struct Frontier {
 }
 
 /// Shortest route from the cell of `start` to the cell of `end`.
-pub fn route(graph: &LatentGraph, start: LatentPoint, end: LatentPoint) -> Result<Vec<NodeId>, NoRoute> {
-    let from = graph.node_at(start).ok_or(NoRoute::UnknownStart { point: start })?;
-    let to = graph.node_at(end).ok_or(NoRoute::UnknownEnd { point: end })?;
+pub fn route(
+    graph: &LatentGraph,
+    start: LatentPoint,
+    end: LatentPoint,
+) -> Result<Vec<NodeId>, NoRoute> {
+    let from = graph
+        .node_at(start)
+        .ok_or(NoRoute::UnknownStart { point: start })?;
+    let to = graph
+        .node_at(end)
+        .ok_or(NoRoute::UnknownEnd { point: end })?;
     route_between(graph, from, to)
 }
 
 /// Shortest route between two nodes, both included.
-pub fn route_between(graph: &LatentGraph, from: NodeId, to: NodeId) -> Result<Vec<NodeId>, NoRoute> {
+pub fn route_between(
+    graph: &LatentGraph,
+    from: NodeId,
+    to: NodeId,
+) -> Result<Vec<NodeId>, NoRoute> {
     shortest_paths(graph.adjacency(), from)
         .path_to(to)
         .ok_or(NoRoute::Unreachable { from, to })
@@ -88,8 +109,15 @@ pub fn route_between(graph: &LatentGraph, from: NodeId, to: NodeId) -> Result<Ve
 /// A uniformly random node farther than `fraction × max` from the cell of `from`, with the
 /// route to it. `fraction` lies in (0, 1) (config validation), so the farthest node always
 /// qualifies once anything else is reachable.
-pub fn frontier<R: Rng>(graph: &LatentGraph, from: LatentPoint, fraction: f64, rng: &mut R) -> Result<Frontier, NoRoute> {
-    let start = graph.node_at(from).ok_or(NoRoute::UnknownStart { point: from })?;
+pub fn frontier<R: Rng>(
+    graph: &LatentGraph,
+    from: LatentPoint,
+    fraction: f64,
+    rng: &mut R,
+) -> Result<Frontier, NoRoute> {
+    let start = graph
+        .node_at(from)
+        .ok_or(NoRoute::UnknownStart { point: from })?;
     let paths = shortest_paths(graph.adjacency(), start);
     let max = paths.max_distance().unwrap_or(0);
     if max == 0 {
@@ -104,13 +132,25 @@ pub fn frontier<R: Rng>(graph: &LatentGraph, from: LatentPoint, fraction: f64, r
         return Err(NoRoute::NothingReachable { from: start });
     }
     let (node, distance) = beyond[rng.random_range(0..beyond.len())];
-    let route = paths.path_to(node).ok_or(NoRoute::Unreachable { from: start, to: node })?;
-    Ok(Frontier { node, distance, route })
+    let route = paths.path_to(node).ok_or(NoRoute::Unreachable {
+        from: start,
+        to: node,
+    })?;
+    Ok(Frontier {
+        node,
+        distance,
+        route,
+    })
 }
 
 /// Answers one SI route query: the direct route, else (with a fallback origin) the route to a
 /// random frontier seen from it, else [`RouteAnswer::NoRoute`].
-pub fn answer_route_query<R: Rng>(graph: &LatentGraph, query: &RouteQuery, fraction: f64, rng: &mut R) -> RouteAnswer {
+pub fn answer_route_query<R: Rng>(
+    graph: &LatentGraph,
+    query: &RouteQuery,
+    fraction: f64,
+    rng: &mut R,
+) -> RouteAnswer {
     if let Ok(nodes) = route(graph, query.start, query.end) {
         return RouteAnswer::Direct(positions(graph, &nodes));
     }
@@ -120,7 +160,9 @@ pub fn answer_route_query<R: Rng>(graph: &LatentGraph, query: &RouteQuery, fract
     // Route to the frontier node by id: its corner position, divided by d again, could
     // round into the neighbouring cell.
     let via_frontier = frontier(graph, origin, fraction, rng).and_then(|f| {
-        let start = graph.node_at(query.start).ok_or(NoRoute::UnknownStart { point: query.start })?;
+        let start = graph
+            .node_at(query.start)
+            .ok_or(NoRoute::UnknownStart { point: query.start })?;
         route_between(graph, start, f.node)
     });
     match via_frontier {
@@ -131,7 +173,10 @@ pub fn answer_route_query<R: Rng>(graph: &LatentGraph, query: &RouteQuery, fract
 
 /// Node positions of `nodes` in φ-space.
 pub fn positions(graph: &LatentGraph, nodes: &[NodeId]) -> Vec<LatentPoint> {
-    nodes.iter().filter_map(|&node| graph.position(node)).collect()
+    nodes
+        .iter()
+        .filter_map(|&node| graph.position(node))
+        .collect()
 }
 
 #[cfg(test)]
@@ -161,7 +206,13 @@ mod tests {
     /// A plus-shaped maze: arms of length 4 from the origin, plus an isolated cell far away.
     fn plus() -> LatentGraph {
         let arm = |dx: i32, dy: i32| (0..=4).map(|i| at(i * dx, i * dy)).collect::<Vec<_>>();
-        build(&[arm(1, 0), arm(-1, 0), arm(0, 1), arm(0, -1), vec![at(50, 50)]])
+        build(&[
+            arm(1, 0),
+            arm(-1, 0),
+            arm(0, 1),
+            arm(0, -1),
+            vec![at(50, 50)],
+        ])
     }
 
     #[test]
@@ -169,11 +220,21 @@ mod tests {
         let g = plus();
         let mut rng = Pcg64::seed_from_u64(3);
         for start in [at(0, 0), at(2, 0), at(0, -4)] {
-            let max = shortest_paths(g.adjacency(), g.node_at(start).unwrap()).max_distance().unwrap();
+            let max = shortest_paths(g.adjacency(), g.node_at(start).unwrap())
+                .max_distance()
+                .unwrap();
             for _ in 0..50 {
                 let f = frontier(&g, start, 0.9, &mut rng).unwrap();
-                assert!(f.distance as f64 > 0.9 * max as f64, "{} vs max {max}", f.distance);
-                assert_eq!(f.route.len() as u64, f.distance + 1, "unit edges: hops = distance");
+                assert!(
+                    f.distance as f64 > 0.9 * max as f64,
+                    "{} vs max {max}",
+                    f.distance
+                );
+                assert_eq!(
+                    f.route.len() as u64,
+                    f.distance + 1,
+                    "unit edges: hops = distance"
+                );
                 assert_eq!(f.route[0], g.node_at(start).unwrap());
                 assert_eq!(*f.route.last().unwrap(), f.node);
             }
@@ -188,7 +249,11 @@ mod tests {
         for _ in 0..200 {
             seen.insert(frontier(&g, at(0, 0), 0.9, &mut rng).unwrap().node);
         }
-        assert_eq!(seen.len(), 4, "the four arm tips are the only nodes at distance 4");
+        assert_eq!(
+            seen.len(),
+            4,
+            "the four arm tips are the only nodes at distance 4"
+        );
     }
 
     #[test]
@@ -205,23 +270,45 @@ mod tests {
     fn unknown_cells_and_unreachable_targets_give_reasons() {
         let g = plus();
         let mut rng = Pcg64::seed_from_u64(5);
-        assert!(matches!(route(&g, at(9, 9), at(0, 0)), Err(NoRoute::UnknownStart { .. })));
-        assert!(matches!(route(&g, at(0, 0), at(9, 9)), Err(NoRoute::UnknownEnd { .. })));
+        assert!(matches!(
+            route(&g, at(9, 9), at(0, 0)),
+            Err(NoRoute::UnknownStart { .. })
+        ));
+        assert!(matches!(
+            route(&g, at(0, 0), at(9, 9)),
+            Err(NoRoute::UnknownEnd { .. })
+        ));
         let err = route(&g, at(0, 0), at(50, 50)).unwrap_err();
         assert!(matches!(err, NoRoute::Unreachable { .. }));
         assert!(err.to_string().contains("not reachable"), "{err}");
-        assert!(matches!(frontier(&g, at(9, 9), 0.9, &mut rng), Err(NoRoute::UnknownStart { .. })));
+        assert!(matches!(
+            frontier(&g, at(9, 9), 0.9, &mut rng),
+            Err(NoRoute::UnknownStart { .. })
+        ));
         let lonely = frontier(&g, at(50, 50), 0.9, &mut rng).unwrap_err();
-        assert!(matches!(lonely, NoRoute::NothingReachable { .. }), "{lonely}");
+        assert!(
+            matches!(lonely, NoRoute::NothingReachable { .. }),
+            "{lonely}"
+        );
     }
 
     #[test]
     fn si_queries_fall_back_to_a_frontier_route() {
         let g = plus();
         let mut rng = Pcg64::seed_from_u64(6);
-        let direct = RouteQuery { start: at(1, 0), end: at(0, 1), fallback_origin: None };
-        assert!(matches!(answer_route_query(&g, &direct, 0.9, &mut rng), RouteAnswer::Direct(r) if r.len() == 3));
-        let unreachable = RouteQuery { start: at(1, 0), end: at(50, 50), fallback_origin: Some(at(0, 0)) };
+        let direct = RouteQuery {
+            start: at(1, 0),
+            end: at(0, 1),
+            fallback_origin: None,
+        };
+        assert!(
+            matches!(answer_route_query(&g, &direct, 0.9, &mut rng), RouteAnswer::Direct(r) if r.len() == 3)
+        );
+        let unreachable = RouteQuery {
+            start: at(1, 0),
+            end: at(50, 50),
+            fallback_origin: Some(at(0, 0)),
+        };
         match answer_route_query(&g, &unreachable, 0.9, &mut rng) {
             RouteAnswer::ViaFrontier(r) => {
                 assert_eq!(r[0], [1.0, 0.0]);
@@ -230,9 +317,22 @@ mod tests {
             }
             other => panic!("expected a frontier route, got {other:?}"),
         }
-        let hopeless = RouteQuery { start: at(9, 9), end: at(0, 0), fallback_origin: Some(at(0, 0)) };
-        assert_eq!(answer_route_query(&g, &hopeless, 0.9, &mut rng), RouteAnswer::NoRoute);
-        let no_fallback = RouteQuery { fallback_origin: None, ..unreachable };
-        assert_eq!(answer_route_query(&g, &no_fallback, 0.9, &mut rng), RouteAnswer::NoRoute);
+        let hopeless = RouteQuery {
+            start: at(9, 9),
+            end: at(0, 0),
+            fallback_origin: Some(at(0, 0)),
+        };
+        assert_eq!(
+            answer_route_query(&g, &hopeless, 0.9, &mut rng),
+            RouteAnswer::NoRoute
+        );
+        let no_fallback = RouteQuery {
+            fallback_origin: None,
+            ..unreachable
+        };
+        assert_eq!(
+            answer_route_query(&g, &no_fallback, 0.9, &mut rng),
+            RouteAnswer::NoRoute
+        );
     }
 }

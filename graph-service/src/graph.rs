@@ -191,8 +191,11 @@ impl GraphBuilder {
 
     /// The finished graph.
     pub fn finish(self) -> LatentGraph {
-        let mut edges: Vec<(NodeId, NodeId, EdgeWeight)> =
-            self.edges.into_iter().map(|((a, b), w)| (a, b, w)).collect();
+        let mut edges: Vec<(NodeId, NodeId, EdgeWeight)> = self
+            .edges
+            .into_iter()
+            .map(|((a, b), w)| (a, b, w))
+            .collect();
         edges.sort_unstable();
         let mut adjacency: Adjacency = vec![Vec::new(); self.keys.len()];
         for &(a, b, w) in &edges {
@@ -221,7 +224,8 @@ mod tests {
     use super::*;
 
     fn build(window: u32, max_nodes: usize, trajectories: &[&[LatentPoint]]) -> LatentGraph {
-        let mut builder = GraphBuilder::new(Grid::new(1.0, NodePosition::Corner), max_nodes, window);
+        let mut builder =
+            GraphBuilder::new(Grid::new(1.0, NodePosition::Corner), max_nodes, window);
         for t in trajectories {
             builder.add_trajectory(t);
         }
@@ -241,7 +245,11 @@ mod tests {
 
     #[test]
     fn nodes_are_numbered_in_first_seen_order() {
-        let g = build(1, 10, &[&[at(5, 5), at(1, 1), at(5, 5)], &[at(-3, 0), at(1, 1)]]);
+        let g = build(
+            1,
+            10,
+            &[&[at(5, 5), at(1, 1), at(5, 5)], &[at(-3, 0), at(1, 1)]],
+        );
         assert_eq!(
             g.keys(),
             &[CellKey([5, 5]), CellKey([1, 1]), CellKey([-3, 0])]
@@ -271,7 +279,15 @@ mod tests {
         //   B–D: (2,4) → 2, (1,4)=3 → 2    C–D: (3,4) → 1, (4,6)=2 → 1
         //   B–A again at (2,5) = 3 → stays 1
         let (a, b, c, d) = ((-1, -1), (0, -1), (-2, 3), (7, 7));
-        let t = [at(a.0, a.1), at(b.0, b.1), at(b.0, b.1), at(c.0, c.1), at(d.0, d.1), at(a.0, a.1), at(c.0, c.1)];
+        let t = [
+            at(a.0, a.1),
+            at(b.0, b.1),
+            at(b.0, b.1),
+            at(c.0, c.1),
+            at(d.0, d.1),
+            at(a.0, a.1),
+            at(c.0, c.1),
+        ];
         let g = build(3, 10, &[&t]);
         assert_eq!(weight(&g, a, b), Some(1));
         assert_eq!(weight(&g, a, c), Some(1));
@@ -292,9 +308,19 @@ mod tests {
         assert_eq!(weight(&g, a, b), Some(3));
         assert_eq!(weight(&g, a, d), Some(1));
         assert_eq!(weight(&g, d, b), Some(1));
-        let second = [at(a.0, a.1), at(d.0, d.1), at(d.0, d.1), at(d.0, d.1), at(b.0, b.1)];
+        let second = [
+            at(a.0, a.1),
+            at(d.0, d.1),
+            at(d.0, d.1),
+            at(d.0, d.1),
+            at(b.0, b.1),
+        ];
         let g = build(3, 10, &[&second]);
-        assert_eq!(weight(&g, a, b), None, "4 steps apart is outside the window");
+        assert_eq!(
+            weight(&g, a, b),
+            None,
+            "4 steps apart is outside the window"
+        );
         assert_eq!(weight(&g, a, d), Some(1));
     }
 

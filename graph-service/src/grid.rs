@@ -47,7 +47,8 @@ impl Grid {
             NodePosition::Corner => 0.0,
             NodePosition::Centre => 0.5,
         };
-        key.0.map(|k| ((f64::from(k) + offset) * self.cell_size) as f32)
+        key.0
+            .map(|k| ((f64::from(k) + offset) * self.cell_size) as f32)
     }
 }
 

@@ -87,7 +87,11 @@ impl PhiLoader {
         })
     }
 
-    fn payload_kind(&self, header: &WeightsHeader, bytes: &[u8]) -> Result<Payload, GraphServiceError> {
+    fn payload_kind(
+        &self,
+        header: &WeightsHeader,
+        bytes: &[u8],
+    ) -> Result<Payload, GraphServiceError> {
         header.check_version()?;
         let (kind, hash) = if header.layout_hash == self.actor_side_hash {
             (Payload::ActorSide, self.actor_side_hash)
@@ -135,5 +139,8 @@ impl Phi {
 
 /// The first two coordinates of a latent row (`encoder.out_dim` is 2, checked at start-up).
 fn to_point(row: &[f32]) -> LatentPoint {
-    [row.first().copied().unwrap_or(f32::NAN), row.get(1).copied().unwrap_or(f32::NAN)]
+    [
+        row.first().copied().unwrap_or(f32::NAN),
+        row.get(1).copied().unwrap_or(f32::NAN),
+    ]
 }

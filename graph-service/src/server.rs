@@ -64,7 +64,11 @@ enum Answer {
 
 impl GraphService {
     /// Answers one request (see the module doc of [`crate::server`]). Never panics.
-    pub fn handle(&mut self, header: &GraphRequestHeader, body: &[u8]) -> (GraphResponseHeader, Vec<u8>) {
+    pub fn handle(
+        &mut self,
+        header: &GraphRequestHeader,
+        body: &[u8],
+    ) -> (GraphResponseHeader, Vec<u8>) {
         self.stats.requests += 1;
         let answer = self.checked_request(header, body).and_then(|request| {
             self.note_phi_version(header);
@@ -73,10 +77,18 @@ impl GraphService {
         let (status, body) = match answer {
             Ok(Answer::Ok(response)) => (GraphStatus::Ok, Some(response)),
             Ok(Answer::NotReady) => (GraphStatus::NotReady, None),
-            Ok(Answer::Unsupported(message)) => (GraphStatus::NotReady, Some(GraphResponse::Error { message })),
+            Ok(Answer::Unsupported(message)) => (
+                GraphStatus::NotReady,
+                Some(GraphResponse::Error { message }),
+            ),
             Err(refusal) => {
                 self.stats.invalid_requests += 1;
-                (refusal.status, Some(GraphResponse::Error { message: refusal.message }))
+                (
+                    refusal.status,
+                    Some(GraphResponse::Error {
+                        message: refusal.message,
+                    }),
+                )
             }
         };
         self.respond(header, status, body)
@@ -95,12 +107,17 @@ impl GraphService {
             Err(_) => (GraphStatus::Internal, Vec::new()),
         };
         let phi_version = self.phi_version();
-        let response = GraphResponseHeader::answering(header, status, self.graph_version, phi_version);
+        let response =
+            GraphResponseHeader::answering(header, status, self.graph_version, phi_version);
         (response, bytes)
     }
 
     /// Version, kind, decoding, kind agreement, finiteness and range checks.
-    fn checked_request(&self, header: &GraphRequestHeader, body: &[u8]) -> Result<GraphRequest, Refusal> {
+    fn checked_request(
+        &self,
+        header: &GraphRequestHeader,
+        body: &[u8],
+    ) -> Result<GraphRequest, Refusal> {
         let kind = header.kind()?;
         let request: GraphRequest = protocol::decode(body)?;
         if request.kind() != kind {
@@ -117,10 +134,17 @@ impl GraphService {
     /// `Err` at the first point whose cell key does not fit in `i32`.
     fn check_in_range(&self, request: &GraphRequest) -> Result<(), Refusal> {
         let points: Vec<(&str, &LatentPoint)> = match request {
-            GraphRequest::FrontierRoute { from } | GraphRequest::ExploreSubgoal { from, .. } => vec![("from", from)],
+            GraphRequest::FrontierRoute { from } | GraphRequest::ExploreSubgoal { from, .. } => {
+                vec![("from", from)]
+            }
             GraphRequest::Routes { queries } => queries.iter().flat_map(query_points).collect(),
-            GraphRequest::LeastVisited { candidates } => candidates.iter().map(|c| ("candidates", c)).collect(),
-            GraphRequest::ReportReaching { samples } => samples.iter().map(|s| ("samples.subgoal", &s.subgoal)).collect(),
+            GraphRequest::LeastVisited { candidates } => {
+                candidates.iter().map(|c| ("candidates", c)).collect()
+            }
+            GraphRequest::ReportReaching { samples } => samples
+                .iter()
+                .map(|s| ("samples.subgoal", &s.subgoal))
+                .collect(),
             GraphRequest::Stats | GraphRequest::Dump => Vec::new(),
         };
         match points.into_iter().find(|(_, p)| self.grid.key(**p).is_none()) {
@@ -145,11 +169,16 @@ impl GraphService {
             GraphRequest::FrontierRoute { from } => self.answer_frontier(from),
             GraphRequest::Routes { queries } => self.answer_routes(&queries),
             GraphRequest::LeastVisited { candidates } => self.answer_least_visited(&candidates)?,
-            GraphRequest::Dump => self.graph.as_ref().map_or(Answer::NotReady, |g| self.dump(g)),
-            GraphRequest::ExploreSubgoal { .. } | GraphRequest::ReportReaching { .. } => Answer::Unsupported(format!(
-                "{:?} (HESS novelty/potential maps) is not supported by this graph-service yet",
-                request.kind()
-            )),
+            GraphRequest::Dump => self
+                .graph
+                .as_ref()
+                .map_or(Answer::NotReady, |g| self.dump(g)),
+            GraphRequest::ExploreSubgoal { .. } | GraphRequest::ReportReaching { .. } => {
+                Answer::Unsupported(format!(
+                    "{:?} (HESS novelty/potential maps) is not supported by this graph-service yet",
+                    request.kind()
+                ))
+            }
         })
     }
 
@@ -197,7 +226,9 @@ impl GraphService {
                 index: index as u32,
                 visits: visits as f32,
             })),
-            Ok(None) => Err(Refusal::invalid("LeastVisited needs at least one candidate")),
+            Ok(None) => Err(Refusal::invalid(
+                "LeastVisited needs at least one candidate",
+            )),
             Err(out) => Err(Refusal::invalid(format!(
                 "candidate {} at {:?} is out of range",
                 out.index, out.point
@@ -215,7 +246,11 @@ impl GraphService {
                 visits: self.counts.of_key(key),
             })
             .collect();
-        let edges = graph.edges().iter().map(|&(a, b, w)| (a, b, w as f32)).collect();
+        let edges = graph
+            .edges()
+            .iter()
+            .map(|&(a, b, w)| (a, b, w as f32))
+            .collect();
         Answer::Ok(GraphResponse::Dump(GraphDump {
             cell_size: graph.grid().cell_size() as f32,
             nodes,
@@ -227,6 +262,11 @@ impl GraphService {
 /// The points of one route query, named.
 fn query_points(query: &RouteQuery) -> Vec<(&'static str, &LatentPoint)> {
     let mut points = vec![("queries.start", &query.start), ("queries.end", &query.end)];
-    points.extend(query.fallback_origin.as_ref().map(|p| ("queries.fallback_origin", p)));
+    points.extend(
+        query
+            .fallback_origin
+            .as_ref()
+            .map(|p| ("queries.fallback_origin", p)),
+    );
     points
 }

@@ -87,7 +87,11 @@ pub struct GraphService {
 impl GraphService {
     /// A service for the run's `config` (validated) and the task's `dims`; `seed` drives the
     /// frontier choices.
-    pub fn new(config: &Config, dims: nets::TaskDims, seed: u64) -> Result<GraphService, GraphServiceError> {
+    pub fn new(
+        config: &Config,
+        dims: nets::TaskDims,
+        seed: u64,
+    ) -> Result<GraphService, GraphServiceError> {
         config
             .validate()
             .map_err(|errors| GraphServiceError::Config(errors.to_string()))?;
@@ -98,7 +102,12 @@ impl GraphService {
             )));
         }
         let spec = nets::spec_from_config(config, dims)?;
-        let layout = StepLayout::new(dims.obs_dim, dims.action_dim, dims.goal_dim, spec.latent_dim)?;
+        let layout = StepLayout::new(
+            dims.obs_dim,
+            dims.action_dim,
+            dims.goal_dim,
+            spec.latent_dim,
+        )?;
         let graph = &config.graph;
         let grid = Grid::new(graph.cell_size, graph.node_position);
         Ok(GraphService {
@@ -121,7 +130,11 @@ impl GraphService {
     /// Checks and stores a trajectory chunk (states s_t of its records, plus s_T when it ends
     /// the episode, with latent points as described in the module doc). A bad chunk is an
     /// `Err`, counted in `rejected_chunks`, and leaves the store unchanged.
-    pub fn ingest(&mut self, header: &TrajectoryHeader, payload: &[f32]) -> Result<(), GraphServiceError> {
+    pub fn ingest(
+        &mut self,
+        header: &TrajectoryHeader,
+        payload: &[f32],
+    ) -> Result<(), GraphServiceError> {
         match self.chunk_states(header, payload) {
             Ok(chunk) => {
                 let n_records = u64::from(header.n_steps);
@@ -129,7 +142,11 @@ impl GraphService {
                 let evicted = self.store.append(chunk);
                 self.counts.remove(&evicted);
                 self.stats.chunks += 1;
-                *self.stats.per_actor_steps.entry(header.actor_id.0).or_insert(0) += n_records;
+                *self
+                    .stats
+                    .per_actor_steps
+                    .entry(header.actor_id.0)
+                    .or_insert(0) += n_records;
                 Ok(())
             }
             Err(err) => {
@@ -140,7 +157,11 @@ impl GraphService {
     }
 
     /// Validates a chunk and extracts its states and latent points; changes nothing.
-    fn chunk_states(&self, header: &TrajectoryHeader, payload: &[f32]) -> Result<ChunkStates, GraphServiceError> {
+    fn chunk_states(
+        &self,
+        header: &TrajectoryHeader,
+        payload: &[f32],
+    ) -> Result<ChunkStates, GraphServiceError> {
         let layout = header.check(payload.len())?;
         self.check_dims(header, &layout)?;
         let records = layout.view_chunk(payload, header.n_steps as usize)?;
@@ -163,7 +184,11 @@ impl GraphService {
     }
 
     /// `Err(ChunkDims)` unless the chunk's record layout is this task's.
-    fn check_dims(&self, header: &TrajectoryHeader, layout: &StepLayout) -> Result<(), GraphServiceError> {
+    fn check_dims(
+        &self,
+        header: &TrajectoryHeader,
+        layout: &StepLayout,
+    ) -> Result<(), GraphServiceError> {
         let ours = &self.layout;
         let pairs = [
             ("obs_dim", ours.obs_dim, layout.obs_dim),
@@ -171,7 +196,10 @@ impl GraphService {
             ("goal_dim", ours.goal_dim, layout.goal_dim),
             ("latent_dim", ours.latent_dim, layout.latent_dim),
         ];
-        match pairs.into_iter().find(|(_, expected, found)| expected != found) {
+        match pairs
+            .into_iter()
+            .find(|(_, expected, found)| expected != found)
+        {
             None => Ok(()),
             Some((field, expected, found)) => Err(GraphServiceError::ChunkDims {
                 actor: header.actor_id.0,
@@ -186,9 +214,17 @@ impl GraphService {
     /// stored state, recounts visits and rebuilds the graph. A message that is not newer is
     /// checked (version, layout hash, length) and otherwise ignored. See [`crate::phi`] for
     /// which layout hashes are accepted. On `Err` nothing changes.
-    pub fn load_weights(&mut self, header: &WeightsHeader, bytes: &[u8]) -> Result<(), GraphServiceError> {
+    pub fn load_weights(
+        &mut self,
+        header: &WeightsHeader,
+        bytes: &[u8],
+    ) -> Result<(), GraphServiceError> {
         self.loader.check(header, bytes)?;
-        if self.phi.as_ref().is_some_and(|phi| header.phi_version <= phi.version()) {
+        if self
+            .phi
+            .as_ref()
+            .is_some_and(|phi| header.phi_version <= phi.version())
+        {
             return Ok(());
         }
         let phi = self.loader.load(header, bytes)?;
@@ -235,13 +271,19 @@ impl GraphService {
     /// A random frontier seen from `from` and the route to it ([`frontier::frontier`]).
     /// Without a graph every start cell is unknown.
     pub fn frontier_route(&mut self, from: LatentPoint) -> Result<Frontier, NoRoute> {
-        let graph = self.graph.as_ref().ok_or(NoRoute::UnknownStart { point: from })?;
+        let graph = self
+            .graph
+            .as_ref()
+            .ok_or(NoRoute::UnknownStart { point: from })?;
         frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng)
     }
 
     /// The route between the cells of two points ([`frontier::route`]).
     pub fn route(&self, start: LatentPoint, end: LatentPoint) -> Result<Vec<NodeId>, NoRoute> {
-        let graph = self.graph.as_ref().ok_or(NoRoute::UnknownStart { point: start })?;
+        let graph = self
+            .graph
+            .as_ref()
+            .ok_or(NoRoute::UnknownStart { point: start })?;
         frontier::route(graph, start, end)
     }
 
@@ -270,7 +312,10 @@ impl GraphService {
 
     /// The stored trajectories' (actor, episode) pairs, oldest first (for tests and tools).
     pub fn stored_episodes(&self) -> Vec<(ActorId, EpisodeId)> {
-        self.store.trajectories().map(|t| (t.actor, t.episode)).collect()
+        self.store
+            .trajectories()
+            .map(|t| (t.actor, t.episode))
+            .collect()
     }
 }
 

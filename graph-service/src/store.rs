@@ -165,7 +165,11 @@ impl TrajectoryStore {
     /// trajectory and must have its length. Returns `false` and changes nothing otherwise.
     pub fn replace_latents(&mut self, latents: Vec<Vec<LatentPoint>>) -> bool {
         let fits = latents.len() == self.trajectories.len()
-            && self.trajectories.iter().zip(&latents).all(|(t, l)| t.len() == l.len());
+            && self
+                .trajectories
+                .iter()
+                .zip(&latents)
+                .all(|(t, l)| t.len() == l.len());
         if fits {
             for (trajectory, new) in self.trajectories.iter_mut().zip(latents) {
                 trajectory.latents = new;
@@ -265,7 +269,14 @@ mod tests {
     use super::*;
 
     /// A chunk of 1-D states `values` (latent = (value, 0)).
-    fn chunk(actor: u32, episode: u64, index: u32, first: u64, values: &[f32], end: bool) -> ChunkStates {
+    fn chunk(
+        actor: u32,
+        episode: u64,
+        index: u32,
+        first: u64,
+        values: &[f32],
+        end: bool,
+    ) -> ChunkStates {
         ChunkStates {
             actor: ActorId(actor),
             episode: EpisodeId(episode),

@@ -3,7 +3,9 @@
 mod common;
 
 use common::*;
-use protocol::graph::{GraphRequestHeader, GraphRequestKind, GraphStatus, ReachSample, RouteAnswer, RouteQuery};
+use protocol::graph::{
+    GraphRequestHeader, GraphRequestKind, GraphStatus, ReachSample, RouteAnswer, RouteQuery,
+};
 use protocol::{GraphRequest, GraphResponse, PhiVersion};
 
 /// A plus-shaped maze of unit cells, arms of length 4, plus a far island (10, 10)–(11, 10).
@@ -20,12 +22,20 @@ fn plus_service() -> graph_service::GraphService {
     service
 }
 
-fn assert_error(service: &mut graph_service::GraphService, header: &GraphRequestHeader, body: &[u8], expected: GraphStatus, words: &str) {
+fn assert_error(
+    service: &mut graph_service::GraphService,
+    header: &GraphRequestHeader,
+    body: &[u8],
+    expected: GraphStatus,
+    words: &str,
+) {
     let (response, bytes) = service.handle(header, body);
     assert_eq!(status(&response), expected);
     assert_eq!(response.request_id, header.request_id);
     match decode_body(&bytes) {
-        Some(GraphResponse::Error { message }) => assert!(message.contains(words), "{message:?} lacks {words:?}"),
+        Some(GraphResponse::Error { message }) => {
+            assert!(message.contains(words), "{message:?} lacks {words:?}")
+        }
         other => panic!("expected an error body, got {other:?}"),
     }
 }
@@ -42,14 +52,30 @@ fn stats_are_answered_before_and_after_the_first_graph() {
     let mut service = service(&config);
     ingest_episode(&mut service, 0, 0, &[at(0, 0), at(1, 0), at(2, 0)]);
     let (response, body) = ask(&mut service, &GraphRequest::Stats);
-    assert_eq!((status(&response), response.graph_version), (GraphStatus::Ok, 0));
-    let Some(GraphResponse::Stats(stats)) = body else { panic!("{body:?}") };
-    assert_eq!((stats.n_nodes, stats.n_stored_steps, stats.n_stored_episodes), (0, 3, 1));
+    assert_eq!(
+        (status(&response), response.graph_version),
+        (GraphStatus::Ok, 0)
+    );
+    let Some(GraphResponse::Stats(stats)) = body else {
+        panic!("{body:?}")
+    };
+    assert_eq!(
+        (stats.n_nodes, stats.n_stored_steps, stats.n_stored_episodes),
+        (0, 3, 1)
+    );
     load_identity(&mut service, &config, 1);
     let (response, body) = ask(&mut service, &GraphRequest::Stats);
-    assert_eq!((response.graph_version, response.phi_version), (1, PhiVersion(1)));
-    let Some(GraphResponse::Stats(stats)) = body else { panic!("{body:?}") };
-    assert_eq!((stats.n_nodes, stats.n_edges, stats.n_dropped_cells), (3, 2, 0));
+    assert_eq!(
+        (response.graph_version, response.phi_version),
+        (1, PhiVersion(1))
+    );
+    let Some(GraphResponse::Stats(stats)) = body else {
+        panic!("{body:?}")
+    };
+    assert_eq!(
+        (stats.n_nodes, stats.n_edges, stats.n_dropped_cells),
+        (3, 2, 0)
+    );
 }
 
 #[test]
@@ -59,7 +85,13 @@ fn graph_requests_before_the_first_graph_are_not_ready() {
     ingest_episode(&mut service, 0, 0, &[at(0, 0), at(1, 0)]);
     let requests = [
         GraphRequest::FrontierRoute { from: at(0, 0) },
-        GraphRequest::Routes { queries: vec![RouteQuery { start: at(0, 0), end: at(1, 0), fallback_origin: None }] },
+        GraphRequest::Routes {
+            queries: vec![RouteQuery {
+                start: at(0, 0),
+                end: at(1, 0),
+                fallback_origin: None,
+            }],
+        },
         GraphRequest::Dump,
     ];
     for request in requests {
@@ -73,32 +105,96 @@ fn graph_requests_before_the_first_graph_are_not_ready() {
 fn malformed_bytes_wrong_versions_and_nan_points_get_errors_and_the_service_keeps_working() {
     let mut service = plus_service();
     let header = GraphRequestHeader::new(42, GraphRequestKind::FrontierRoute, PhiVersion(1));
-    assert_error(&mut service, &header, &[0xff, 0xff, 0xff, 0xff, 0x0f], GraphStatus::InvalidRequest, "malformed");
-    assert_error(&mut service, &header, &[], GraphStatus::InvalidRequest, "malformed");
+    assert_error(
+        &mut service,
+        &header,
+        &[0xff, 0xff, 0xff, 0xff, 0x0f],
+        GraphStatus::InvalidRequest,
+        "malformed",
+    );
+    assert_error(
+        &mut service,
+        &header,
+        &[],
+        GraphStatus::InvalidRequest,
+        "malformed",
+    );
     let good = protocol::encode(&GraphRequest::FrontierRoute { from: at(0, 0) }).unwrap();
     let mut trailing = good.clone();
     trailing.push(0);
-    assert_error(&mut service, &header, &trailing, GraphStatus::InvalidRequest, "trailing");
+    assert_error(
+        &mut service,
+        &header,
+        &trailing,
+        GraphStatus::InvalidRequest,
+        "trailing",
+    );
     let mut old = header;
     old.protocol_version += 7;
-    assert_error(&mut service, &old, &good, GraphStatus::VersionMismatch, "version");
+    assert_error(
+        &mut service,
+        &old,
+        &good,
+        GraphStatus::VersionMismatch,
+        "version",
+    );
     let mut unknown = header;
     unknown.kind = 99;
-    assert_error(&mut service, &unknown, &good, GraphStatus::InvalidRequest, "unknown");
+    assert_error(
+        &mut service,
+        &unknown,
+        &good,
+        GraphStatus::InvalidRequest,
+        "unknown",
+    );
     let stats_header = GraphRequestHeader::new(43, GraphRequestKind::Stats, PhiVersion(1));
-    assert_error(&mut service, &stats_header, &good, GraphStatus::InvalidRequest, "header says");
-    let nan = protocol::encode(&GraphRequest::FrontierRoute { from: [f32::NAN, 0.0] }).unwrap();
-    assert_error(&mut service, &header, &nan, GraphStatus::InvalidRequest, "non-finite");
+    assert_error(
+        &mut service,
+        &stats_header,
+        &good,
+        GraphStatus::InvalidRequest,
+        "header says",
+    );
+    let nan = protocol::encode(&GraphRequest::FrontierRoute {
+        from: [f32::NAN, 0.0],
+    })
+    .unwrap();
+    assert_error(
+        &mut service,
+        &header,
+        &nan,
+        GraphStatus::InvalidRequest,
+        "non-finite",
+    );
     let inf_query = GraphRequest::Routes {
-        queries: vec![RouteQuery { start: at(0, 0), end: at(1, 0), fallback_origin: Some([0.0, f32::INFINITY]) }],
+        queries: vec![RouteQuery {
+            start: at(0, 0),
+            end: at(1, 0),
+            fallback_origin: Some([0.0, f32::INFINITY]),
+        }],
     };
     let routes_header = GraphRequestHeader::new(44, GraphRequestKind::Routes, PhiVersion(1));
-    assert_error(&mut service, &routes_header, &protocol::encode(&inf_query).unwrap(), GraphStatus::InvalidRequest, "non-finite");
+    assert_error(
+        &mut service,
+        &routes_header,
+        &protocol::encode(&inf_query).unwrap(),
+        GraphStatus::InvalidRequest,
+        "non-finite",
+    );
     let huge = protocol::encode(&GraphRequest::FrontierRoute { from: [3e38, 0.0] }).unwrap();
-    assert_error(&mut service, &header, &huge, GraphStatus::InvalidRequest, "out of range");
+    assert_error(
+        &mut service,
+        &header,
+        &huge,
+        GraphStatus::InvalidRequest,
+        "out of range",
+    );
     assert_eq!(service.stats().invalid_requests, 9);
     stats_still_work(&mut service);
-    let (response, body) = ask(&mut service, &GraphRequest::FrontierRoute { from: at(0, 0) });
+    let (response, body) = ask(
+        &mut service,
+        &GraphRequest::FrontierRoute { from: at(0, 0) },
+    );
     assert_eq!(status(&response), GraphStatus::Ok);
     assert!(matches!(body, Some(GraphResponse::FrontierRoute(Some(_)))));
 }
@@ -110,11 +206,17 @@ fn random_bytes_never_panic_the_handler() {
     for len in 0..300 {
         let bytes: Vec<u8> = (0..len % 40)
             .map(|_| {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (state >> 56) as u8
             })
             .collect();
-        let kind = [GraphRequestKind::FrontierRoute, GraphRequestKind::Routes, GraphRequestKind::LeastVisited][len % 3];
+        let kind = [
+            GraphRequestKind::FrontierRoute,
+            GraphRequestKind::Routes,
+            GraphRequestKind::LeastVisited,
+        ][len % 3];
         let header = GraphRequestHeader::new(len as u64, kind, PhiVersion(1));
         let (response, _) = service.handle(&header, &bytes);
         assert_eq!(response.request_id, len as u64);
@@ -126,13 +228,21 @@ fn random_bytes_never_panic_the_handler() {
 fn frontier_route_goes_from_the_start_cell_to_a_far_node() {
     let mut service = plus_service();
     for _ in 0..20 {
-        let (response, body) = ask(&mut service, &GraphRequest::FrontierRoute { from: [1.2, 0.3] });
+        let (response, body) = ask(
+            &mut service,
+            &GraphRequest::FrontierRoute { from: [1.2, 0.3] },
+        );
         assert_eq!(status(&response), GraphStatus::Ok);
-        let Some(GraphResponse::FrontierRoute(Some(answer))) = body else { panic!("{body:?}") };
+        let Some(GraphResponse::FrontierRoute(Some(answer))) = body else {
+            panic!("{body:?}")
+        };
         // From (1, 0): the tips (−4, 0), (0, 4), (0, −4) are 5 hops away, (4, 0) is 3.
         // Beyond 0.9 × 5 = 4.5: exactly the three tips at distance 5.
         assert_eq!(answer.distance, 5.0);
-        assert!([[-4.0, 0.0], [0.0, 4.0], [0.0, -4.0]].contains(&answer.frontier), "{answer:?}");
+        assert!(
+            [[-4.0, 0.0], [0.0, 4.0], [0.0, -4.0]].contains(&answer.frontier),
+            "{answer:?}"
+        );
         assert_eq!(answer.route.first(), Some(&[1.0, 0.0]));
         assert_eq!(answer.route.last(), Some(&answer.frontier));
         assert_eq!(answer.route.len(), 6);
@@ -148,8 +258,13 @@ fn frontier_route_from_an_unknown_or_isolated_cell_is_none() {
         assert_eq!(body, Some(GraphResponse::FrontierRoute(None)));
     }
     // The island's two cells: the other one is the frontier.
-    let (_, body) = ask(&mut service, &GraphRequest::FrontierRoute { from: at(10, 10) });
-    let Some(GraphResponse::FrontierRoute(Some(answer))) = body else { panic!("{body:?}") };
+    let (_, body) = ask(
+        &mut service,
+        &GraphRequest::FrontierRoute { from: at(10, 10) },
+    );
+    let Some(GraphResponse::FrontierRoute(Some(answer))) = body else {
+        panic!("{body:?}")
+    };
     assert_eq!(answer.frontier, [11.0, 10.0]);
 }
 
@@ -157,18 +272,52 @@ fn frontier_route_from_an_unknown_or_isolated_cell_is_none() {
 fn routes_answer_each_query_in_order_with_the_si_fallback() {
     let mut service = plus_service();
     let queries = vec![
-        RouteQuery { start: at(2, 0), end: at(0, -3), fallback_origin: None },
-        RouteQuery { start: at(2, 0), end: at(10, 10), fallback_origin: Some(at(0, 0)) },
-        RouteQuery { start: at(2, 0), end: at(10, 10), fallback_origin: None },
-        RouteQuery { start: at(40, 0), end: at(0, 0), fallback_origin: Some(at(0, 0)) },
-        RouteQuery { start: at(3, 0), end: at(3, 0), fallback_origin: None },
+        RouteQuery {
+            start: at(2, 0),
+            end: at(0, -3),
+            fallback_origin: None,
+        },
+        RouteQuery {
+            start: at(2, 0),
+            end: at(10, 10),
+            fallback_origin: Some(at(0, 0)),
+        },
+        RouteQuery {
+            start: at(2, 0),
+            end: at(10, 10),
+            fallback_origin: None,
+        },
+        RouteQuery {
+            start: at(40, 0),
+            end: at(0, 0),
+            fallback_origin: Some(at(0, 0)),
+        },
+        RouteQuery {
+            start: at(3, 0),
+            end: at(3, 0),
+            fallback_origin: None,
+        },
     ];
     let (response, body) = ask(&mut service, &GraphRequest::Routes { queries });
     assert_eq!(status(&response), GraphStatus::Ok);
-    let Some(GraphResponse::Routes(answers)) = body else { panic!("{body:?}") };
+    let Some(GraphResponse::Routes(answers)) = body else {
+        panic!("{body:?}")
+    };
     assert_eq!(answers.len(), 5);
-    assert_eq!(answers[0], RouteAnswer::Direct(vec![[2.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, -1.0], [0.0, -2.0], [0.0, -3.0]]));
-    let RouteAnswer::ViaFrontier(route) = &answers[1] else { panic!("{:?}", answers[1]) };
+    assert_eq!(
+        answers[0],
+        RouteAnswer::Direct(vec![
+            [2.0, 0.0],
+            [1.0, 0.0],
+            [0.0, 0.0],
+            [0.0, -1.0],
+            [0.0, -2.0],
+            [0.0, -3.0]
+        ])
+    );
+    let RouteAnswer::ViaFrontier(route) = &answers[1] else {
+        panic!("{:?}", answers[1])
+    };
     assert_eq!(route[0], [2.0, 0.0]);
     assert!([[4.0, 0.0], [-4.0, 0.0], [0.0, 4.0], [0.0, -4.0]].contains(route.last().unwrap()));
     assert_eq!(answers[2], RouteAnswer::NoRoute);
@@ -183,10 +332,30 @@ fn least_visited_picks_the_candidate_with_fewest_stored_states() {
     let candidates = vec![at(0, 0), at(2, 0), at(25, 25), at(3, 0)];
     let (response, body) = ask(&mut service, &GraphRequest::LeastVisited { candidates });
     assert_eq!(status(&response), GraphStatus::Ok);
-    assert_eq!(body, Some(GraphResponse::LeastVisited { index: 2, visits: 0.0 }));
-    let (_, body) = ask(&mut service, &GraphRequest::LeastVisited { candidates: vec![at(0, 0), at(1, 0)] });
-    assert_eq!(body, Some(GraphResponse::LeastVisited { index: 1, visits: 1.0 }));
-    let (response, _) = ask(&mut service, &GraphRequest::LeastVisited { candidates: vec![] });
+    assert_eq!(
+        body,
+        Some(GraphResponse::LeastVisited {
+            index: 2,
+            visits: 0.0
+        })
+    );
+    let (_, body) = ask(
+        &mut service,
+        &GraphRequest::LeastVisited {
+            candidates: vec![at(0, 0), at(1, 0)],
+        },
+    );
+    assert_eq!(
+        body,
+        Some(GraphResponse::LeastVisited {
+            index: 1,
+            visits: 1.0
+        })
+    );
+    let (response, _) = ask(
+        &mut service,
+        &GraphRequest::LeastVisited { candidates: vec![] },
+    );
     assert_eq!(status(&response), GraphStatus::InvalidRequest);
 }
 
@@ -195,9 +364,15 @@ fn dump_lists_nodes_with_visits_and_edges() {
     let mut service = plus_service();
     let (response, body) = ask(&mut service, &GraphRequest::Dump);
     assert_eq!(status(&response), GraphStatus::Ok);
-    let Some(GraphResponse::Dump(dump)) = body else { panic!("{body:?}") };
+    let Some(GraphResponse::Dump(dump)) = body else {
+        panic!("{body:?}")
+    };
     assert_eq!(dump.cell_size, 1.0);
-    assert_eq!(dump.nodes.len(), 1 + 4 * 4 + 2, "origin, four arms, the island");
+    assert_eq!(
+        dump.nodes.len(),
+        1 + 4 * 4 + 2,
+        "origin, four arms, the island"
+    );
     assert_eq!(dump.nodes[0].key, [0, 0]);
     assert_eq!(dump.nodes[0].visits, 4);
     assert_eq!(dump.edges.len(), 4 * 4 + 1);
@@ -208,13 +383,23 @@ fn dump_lists_nodes_with_visits_and_edges() {
 fn hess_requests_say_they_are_not_supported_yet() {
     let mut service = plus_service();
     let requests = [
-        GraphRequest::ExploreSubgoal { from: at(0, 0), episode: 500 },
-        GraphRequest::ReportReaching { samples: vec![ReachSample { subgoal: at(0, 0), error: 1.0 }] },
+        GraphRequest::ExploreSubgoal {
+            from: at(0, 0),
+            episode: 500,
+        },
+        GraphRequest::ReportReaching {
+            samples: vec![ReachSample {
+                subgoal: at(0, 0),
+                error: 1.0,
+            }],
+        },
     ];
     for request in requests {
         let (response, body) = ask(&mut service, &request);
         assert_eq!(status(&response), GraphStatus::NotReady);
-        let Some(GraphResponse::Error { message }) = body else { panic!("{body:?}") };
+        let Some(GraphResponse::Error { message }) = body else {
+            panic!("{body:?}")
+        };
         assert!(message.contains("not supported"), "{message}");
     }
 }
@@ -225,6 +410,9 @@ fn requests_with_another_phi_version_are_answered_and_counted() {
     let header = GraphRequestHeader::new(5, GraphRequestKind::FrontierRoute, PhiVersion(0));
     let body = protocol::encode(&GraphRequest::FrontierRoute { from: at(0, 0) }).unwrap();
     let (response, _) = service.handle(&header, &body);
-    assert_eq!((status(&response), response.phi_version), (GraphStatus::Ok, PhiVersion(1)));
+    assert_eq!(
+        (status(&response), response.phi_version),
+        (GraphStatus::Ok, PhiVersion(1))
+    );
     assert_eq!(service.stats().stale_phi_requests, 1);
 }

@@ -12,12 +12,24 @@ fn stats_count_env_steps_per_actor_and_stored_states() {
     let mut service = service(&config);
     ingest_episode(&mut service, 3, 0, &[at(0, 0), at(1, 0), at(2, 0)]);
     ingest_episode(&mut service, 5, 0, &[at(0, 0), at(0, 1)]);
-    ingest_episode(&mut service, 3, 1, &[at(0, 0), at(0, 1), at(0, 2), at(0, 3)]);
+    ingest_episode(
+        &mut service,
+        3,
+        1,
+        &[at(0, 0), at(0, 1), at(0, 2), at(0, 3)],
+    );
     let stats = service.stats();
-    assert_eq!(stats.per_actor_steps.into_iter().collect::<Vec<_>>(), vec![(3, 5), (5, 1)]);
+    assert_eq!(
+        stats.per_actor_steps.into_iter().collect::<Vec<_>>(),
+        vec![(3, 5), (5, 1)]
+    );
     assert_eq!(stats.chunks, 3);
     assert_eq!(stats.stored_episodes, 3);
-    assert_eq!(stats.stored_steps, 3 + 2 + 4, "a T-step episode stores T + 1 states");
+    assert_eq!(
+        stats.stored_steps,
+        3 + 2 + 4,
+        "a T-step episode stores T + 1 states"
+    );
     assert_eq!(stats.rejected_chunks, 0);
 }
 
@@ -25,14 +37,24 @@ fn stats_count_env_steps_per_actor_and_stored_states() {
 fn chunks_of_one_episode_join_into_one_trajectory() {
     let config = config();
     let mut service = service(&config);
-    let first = Chunk { end: false, ..Chunk::new(1, 9) };
+    let first = Chunk {
+        end: false,
+        ..Chunk::new(1, 9)
+    };
     let (h, p) = first.encode(&[at(0, 0), at(1, 0), at(2, 0)]);
     service.ingest(&h, &p).unwrap();
-    let second = Chunk { chunk_index: 1, first_env_step: 2, ..Chunk::new(1, 9) };
+    let second = Chunk {
+        chunk_index: 1,
+        first_env_step: 2,
+        ..Chunk::new(1, 9)
+    };
     let (h, p) = second.encode(&[at(2, 0), at(3, 0)]);
     service.ingest(&h, &p).unwrap();
     let stats = service.stats();
-    assert_eq!((stats.stored_episodes, stats.stored_steps, stats.chunk_gaps), (1, 4, 0));
+    assert_eq!(
+        (stats.stored_episodes, stats.stored_steps, stats.chunk_gaps),
+        (1, 4, 0)
+    );
     assert_eq!(service.stored_episodes(), vec![(ActorId(1), EpisodeId(9))]);
 }
 
@@ -43,16 +65,34 @@ fn a_wrong_length_chunk_is_refused_and_changes_nothing() {
     ingest_episode(&mut service, 0, 0, &[at(0, 0), at(1, 0)]);
     let before = service.stats();
     let (header, payload) = Chunk::new(0, 1).encode(&[at(0, 0), at(1, 0), at(2, 0)]);
-    let err = service.ingest(&header, &payload[..payload.len() - 1]).unwrap_err();
-    assert!(matches!(err, GraphServiceError::Protocol(ProtocolError::LengthMismatch { .. })), "{err}");
+    let err = service
+        .ingest(&header, &payload[..payload.len() - 1])
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            GraphServiceError::Protocol(ProtocolError::LengthMismatch { .. })
+        ),
+        "{err}"
+    );
     let mut longer = payload.clone();
     longer.push(0.0);
     assert!(service.ingest(&header, &longer).is_err());
     let after = service.stats();
     assert_eq!(after.rejected_chunks, 2);
     assert_eq!(
-        (after.stored_steps, after.stored_episodes, after.chunks, after.per_actor_steps.clone()),
-        (before.stored_steps, before.stored_episodes, before.chunks, before.per_actor_steps.clone())
+        (
+            after.stored_steps,
+            after.stored_episodes,
+            after.chunks,
+            after.per_actor_steps.clone()
+        ),
+        (
+            before.stored_steps,
+            before.stored_episodes,
+            before.chunks,
+            before.per_actor_steps.clone()
+        )
     );
     assert_eq!(service.visits(at(2, 0)), Some(0));
 }
@@ -65,7 +105,10 @@ fn a_wrong_version_chunk_is_refused_naming_both_versions() {
     header.protocol_version = protocol::PROTOCOL_VERSION + 1;
     let err = service.ingest(&header, &payload).unwrap_err();
     let message = err.to_string();
-    assert!(message.contains(&protocol::PROTOCOL_VERSION.to_string()) && message.contains("mismatch"), "{message}");
+    assert!(
+        message.contains(&protocol::PROTOCOL_VERSION.to_string()) && message.contains("mismatch"),
+        "{message}"
+    );
     assert_eq!(service.stats().stored_steps, 0);
     assert_eq!(service.stats().rejected_chunks, 1);
 }
@@ -78,13 +121,31 @@ fn chunks_of_another_task_or_with_nan_are_refused() {
     header.obs_dim += 1;
     header.goal_dim -= 1; // same record length (obs and goal both appear twice), another layout
     let err = service.ingest(&header, &payload).unwrap_err();
-    assert!(matches!(err, GraphServiceError::ChunkDims { field: "obs_dim", .. }), "{err}");
+    assert!(
+        matches!(
+            err,
+            GraphServiceError::ChunkDims {
+                field: "obs_dim",
+                ..
+            }
+        ),
+        "{err}"
+    );
     let (header, mut payload) = Chunk::new(0, 0).encode(&[at(0, 0), at(1, 0)]);
     payload[0] = f32::NAN;
     let err = service.ingest(&header, &payload).unwrap_err();
-    assert!(matches!(err, GraphServiceError::Protocol(ProtocolError::NonFinite { .. })), "{err}");
+    assert!(
+        matches!(
+            err,
+            GraphServiceError::Protocol(ProtocolError::NonFinite { .. })
+        ),
+        "{err}"
+    );
     let stats = service.stats();
-    assert_eq!((stats.rejected_chunks, stats.stored_steps, stats.chunks), (2, 0, 0));
+    assert_eq!(
+        (stats.rejected_chunks, stats.stored_steps, stats.chunks),
+        (2, 0, 0)
+    );
 }
 
 #[test]
@@ -97,8 +158,22 @@ fn the_store_evicts_oldest_episodes_and_counts_follow() {
     assert_eq!(service.visits(at(5, 5)), Some(2));
     ingest_episode(&mut service, 1, 0, &[at(0, 0), at(0, 1)]);
     let stats = service.stats();
-    assert_eq!((stats.stored_steps, stats.stored_episodes, stats.evicted_steps), (5, 2, 3));
-    assert_eq!(service.visits(at(5, 5)), Some(0), "evicted states leave the counts");
+    assert_eq!(
+        (
+            stats.stored_steps,
+            stats.stored_episodes,
+            stats.evicted_steps
+        ),
+        (5, 2, 3)
+    );
+    assert_eq!(
+        service.visits(at(5, 5)),
+        Some(0),
+        "evicted states leave the counts"
+    );
     assert_eq!(service.visits(at(0, 0)), Some(2));
-    assert_eq!(service.stored_episodes(), vec![(ActorId(0), EpisodeId(1)), (ActorId(1), EpisodeId(0))]);
+    assert_eq!(
+        service.stored_episodes(),
+        vec![(ActorId(0), EpisodeId(1)), (ActorId(1), EpisodeId(0))]
+    );
 }

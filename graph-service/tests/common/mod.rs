@@ -7,15 +7,20 @@ use candle_nn::VarMap;
 use graph_service::GraphService;
 use protocol::graph::{GraphRequestHeader, GraphResponseHeader, GraphStatus};
 use protocol::{
-    ActorId, Config, DecisionKind, EpisodeId, GraphRequest, GraphResponse, LatentPoint, PhiVersion, PolicyVersion,
-    StepRecord, TrajectoryFlags, TrajectoryHeader, WeightsHeader,
+    ActorId, Config, DecisionKind, EpisodeId, GraphRequest, GraphResponse, LatentPoint, PhiVersion,
+    PolicyVersion, StepRecord, TrajectoryFlags, TrajectoryHeader, WeightsHeader,
 };
 
 /// Observation length of the test task: (x, y, z); φ uses x and y.
 pub const OBS_DIM: usize = 3;
 
 pub fn dims() -> nets::TaskDims {
-    nets::TaskDims { obs_dim: OBS_DIM, goal_dim: 2, action_dim: 2, action_scale: 1.0 }
+    nets::TaskDims {
+        obs_dim: OBS_DIM,
+        goal_dim: 2,
+        action_dim: 2,
+        action_scale: 1.0,
+    }
 }
 
 /// Unit cells, small networks (φ: 3 → 4 → 2).
@@ -55,7 +60,14 @@ pub struct Chunk {
 
 impl Chunk {
     pub fn new(actor: u32, episode: u64) -> Self {
-        Self { actor, episode, chunk_index: 0, first_env_step: 0, end: true, phi_version: 0 }
+        Self {
+            actor,
+            episode,
+            chunk_index: 0,
+            first_env_step: 0,
+            end: true,
+            phi_version: 0,
+        }
     }
 
     pub fn encode(&self, points: &[LatentPoint]) -> (TrajectoryHeader, Vec<f32>) {
@@ -73,7 +85,9 @@ impl Chunk {
             header.flags.insert(TrajectoryFlags::EPISODE_START);
         }
         if self.end {
-            header.flags.insert(TrajectoryFlags::EPISODE_END | TrajectoryFlags::TRUNCATED);
+            header
+                .flags
+                .insert(TrajectoryFlags::EPISODE_END | TrajectoryFlags::TRUNCATED);
         }
         (header, layout.encode_chunk(&records).unwrap())
     }
@@ -99,7 +113,12 @@ fn record(from: LatentPoint, to: LatentPoint) -> StepRecord {
 }
 
 /// Ingests one whole episode through `points` (one chunk).
-pub fn ingest_episode(service: &mut GraphService, actor: u32, episode: u64, points: &[LatentPoint]) {
+pub fn ingest_episode(
+    service: &mut GraphService,
+    actor: u32,
+    episode: u64,
+    points: &[LatentPoint],
+) {
     let (header, payload) = Chunk::new(actor, episode).encode(points);
     service.ingest(&header, &payload).unwrap();
 }
@@ -110,7 +129,12 @@ pub fn actor_side_params(config: &Config, scale: f32) -> VarMap {
     let spec = nets::spec_from_config(config, dims()).unwrap();
     let vb = nets::seeded_var_builder(&params, 1, &Device::Cpu);
     nets::PolicySet::new(&spec, &vb).unwrap();
-    let relu_split = [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]];
+    let relu_split = [
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+    ];
     let merge = [[scale, -scale, 0.0, 0.0], [0.0, 0.0, scale, -scale]];
     set(&params, "encoder.l0.weight", &relu_split.concat(), (4, 3));
     set(&params, "encoder.l0.bias", &[0.0; 4], (4,));
@@ -121,15 +145,26 @@ pub fn actor_side_params(config: &Config, scale: f32) -> VarMap {
 
 fn set<S: Into<candle_core::Shape>>(params: &VarMap, name: &str, values: &[f32], shape: S) {
     let data = params.data().lock().unwrap();
-    let var = data.get(name).unwrap_or_else(|| panic!("no parameter {name}"));
-    var.set(&Tensor::from_slice(values, shape, &Device::Cpu).unwrap()).unwrap();
+    let var = data
+        .get(name)
+        .unwrap_or_else(|| panic!("no parameter {name}"));
+    var.set(&Tensor::from_slice(values, shape, &Device::Cpu).unwrap())
+        .unwrap();
 }
 
 /// A weights message of `params` at φ version `phi_version`.
 pub fn weights(params: &VarMap, phi_version: u64) -> (WeightsHeader, Vec<u8>) {
     let bytes = nets::to_safetensors_bytes(params).unwrap();
     let hash = nets::layout_hash(params);
-    (WeightsHeader::new(PolicyVersion(phi_version), PhiVersion(phi_version), hash, bytes.len()), bytes)
+    (
+        WeightsHeader::new(
+            PolicyVersion(phi_version),
+            PhiVersion(phi_version),
+            hash,
+            bytes.len(),
+        ),
+        bytes,
+    )
 }
 
 /// Loads φ(s) = s_xy at `phi_version` (builds the first graph).
@@ -139,7 +174,10 @@ pub fn load_identity(service: &mut GraphService, config: &Config, phi_version: u
 }
 
 /// Sends `request` through `handle`; returns the status and the decoded body (None if empty).
-pub fn ask(service: &mut GraphService, request: &GraphRequest) -> (GraphResponseHeader, Option<GraphResponse>) {
+pub fn ask(
+    service: &mut GraphService,
+    request: &GraphRequest,
+) -> (GraphResponseHeader, Option<GraphResponse>) {
     let header = GraphRequestHeader::new(1, request.kind(), service.phi_version());
     let body = protocol::encode(request).unwrap();
     let (response, bytes) = service.handle(&header, &body);
