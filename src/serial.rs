@@ -86,14 +86,7 @@ fn broadcast_weights(learner: &mut Learner, actors: &mut [Actor], graph: &mut Gr
 
 /// One JSON object per completed episode; only values that depend on the seed, no clock.
 fn write_line(out: &mut impl Write, learner: &Learner, graph: &GraphService) -> anyhow::Result<()> {
-    let p = learner.progress();
-    let s = learner.ingest_stats();
     let mut object = serde_json::Map::new();
-    object.insert("learner/ingest/env_steps".to_owned(), serde_json::json!(p.env_steps_ingested));
-    object.insert("learner/ingest/episodes".to_owned(), serde_json::json!(s.episodes_completed));
-    object.insert("learner/learner/updates_low".to_owned(), serde_json::json!(p.updates_low));
-    object.insert("learner/learner/updates_high".to_owned(), serde_json::json!(p.updates_high));
-    object.insert("learner/learner/policy_version".to_owned(), serde_json::json!(p.policy_version.0));
     for (name, value) in learner.metrics() {
         if !name.contains("per_sec") {
             object.insert(format!("learner/{name}"), serde_json::json!(value));

@@ -15,10 +15,10 @@ use crate::run::RunContext;
 /// Headline columns of `metrics.csv`, each the key of a value in the book.
 const CSV_COLUMNS: [&str; 7] = [
     "learner/ingest/env_steps",
-    "learner/ingest/episodes",
-    "learner/learner/updates_low",
-    "learner/learner/updates_high",
-    "learner/learner/policy_version",
+    "learner/ingest/episodes_completed",
+    "learner/charts/updates_low",
+    "learner/charts/updates_high",
+    "learner/charts/policy_version",
     "learner/ingest/lost_chunks",
     "graph-service/graph/stored_steps",
 ];
@@ -73,7 +73,7 @@ impl MetricsBook {
 
     pub fn budget_reached(&self, config: &Config) -> bool {
         let steps = self.get("learner/ingest/env_steps") as u64;
-        let episodes = self.get("learner/ingest/episodes") as u64;
+        let episodes = self.get("learner/ingest/episodes_completed") as u64;
         config.run.max_env_steps.is_some_and(|max| steps >= max) || episodes >= config.run.max_episodes
     }
 
@@ -82,8 +82,8 @@ impl MetricsBook {
             "env steps {} | {:.0} steps/s | episodes {} | eval success - | policy v{} | restarts {restarts}",
             self.get("learner/ingest/env_steps") as u64,
             self.rate.per_sec(),
-            self.get("learner/ingest/episodes") as u64,
-            self.get("learner/learner/policy_version") as u64,
+            self.get("learner/ingest/episodes_completed") as u64,
+            self.get("learner/charts/policy_version") as u64,
         );
         if self.bar.is_hidden() {
             if self.last_plain.elapsed() >= PLAIN_PROGRESS_INTERVAL {

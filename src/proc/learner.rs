@@ -121,21 +121,7 @@ fn reconnect(progress: &ValuePublisher<ProgressMessage>, weights: Option<&Weight
 }
 
 fn learner_metrics(learner: &Learner) -> Vec<(String, f64)> {
-    let p = learner.progress();
-    let s = learner.ingest_stats();
-    let mut values = vec![
-        ("ingest/env_steps".to_owned(), p.env_steps_ingested as f64),
-        ("ingest/episodes".to_owned(), s.episodes_completed as f64),
-        ("ingest/lost_chunks".to_owned(), s.lost_chunks as f64),
-        ("ingest/duplicate_chunks".to_owned(), s.duplicate_chunks as f64),
-        ("ingest/rejected_chunks".to_owned(), s.rejected_chunks as f64),
-        ("learner/updates_low".to_owned(), p.updates_low as f64),
-        ("learner/updates_high".to_owned(), p.updates_high as f64),
-        ("learner/policy_version".to_owned(), p.policy_version.0 as f64),
-        ("learner/env_step_budget".to_owned(), p.env_step_budget as f64),
-    ];
-    values.extend(learner.metrics().into_iter().map(|(k, v)| (k.to_owned(), v)));
-    values
+    learner.metrics().into_iter().map(|(k, v)| (k.to_owned(), v)).collect()
 }
 
 fn write_final_status(ctx: &RunContext, learner: &Learner, reason: &str) -> anyhow::Result<()> {
