@@ -18,7 +18,8 @@
 use envs::api::{Env, EnvSpec};
 use nets::{NetsSpec, TaskDims};
 use protocol::{
-    ActorId, Config, PhiVersion, PolicyVersion, StepLayout, TrajectoryFlags, TrajectoryHeader, WeightsHeader,
+    ActorId, Config, PhiVersion, PolicyVersion, StepLayout, TrajectoryFlags, TrajectoryHeader,
+    WeightsHeader,
 };
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
@@ -80,12 +81,22 @@ impl Actor {
     /// `seed`, so a learner that builds its `PolicySet` first from the same seed starts from the
     /// same weights) and the generator for noise (`Pcg64Mcg` from `seed` mixed with `actor_id`).
     pub fn new(config: &Config, actor_id: ActorId, seed: u64) -> Result<Actor, ActorError> {
-        Self::with_env(config, actor_id, seed, envs::registry::make(&config.env.task)?)
+        Self::with_env(
+            config,
+            actor_id,
+            seed,
+            envs::registry::make(&config.env.task)?,
+        )
     }
 
     /// As [`Actor::new`], on an environment the caller built (e.g. a task with non-default
     /// parameters); `config.env.task` is not looked at.
-    pub fn with_env(config: &Config, actor_id: ActorId, seed: u64, env: Box<dyn Env>) -> Result<Actor, ActorError> {
+    pub fn with_env(
+        config: &Config,
+        actor_id: ActorId,
+        seed: u64,
+        env: Box<dyn Env>,
+    ) -> Result<Actor, ActorError> {
         config.validate()?;
         let spec = env.spec().clone();
         let dims = TaskDims {
@@ -96,7 +107,12 @@ impl Actor {
         };
         let nets_spec = nets::spec_from_config(config, dims)?;
         let nets = ActorNets::new(&nets_spec, seed)?;
-        let layout = StepLayout::new(spec.obs_dim, spec.action_dim, spec.goal_dim, nets_spec.latent_dim)?;
+        let layout = StepLayout::new(
+            spec.obs_dim,
+            spec.action_dim,
+            spec.goal_dim,
+            nets_spec.latent_dim,
+        )?;
         let writer = RecordWriter::new(layout)?;
         let mut header_template = TrajectoryHeader::for_layout(&layout)?;
         header_template.actor_id = actor_id;
@@ -179,7 +195,10 @@ impl Actor {
             if self.episode.is_none() {
                 if n_empty_episodes == MAX_EMPTY_EPISODES {
                     let (actor_id, n_episodes) = (self.actor_id.0, n_empty_episodes);
-                    return Err(ActorError::NoProgress { actor_id, n_episodes });
+                    return Err(ActorError::NoProgress {
+                        actor_id,
+                        n_episodes,
+                    });
                 }
                 n_empty_episodes += 1;
                 self.start_episode()?;
@@ -197,7 +216,11 @@ impl Actor {
             return self.cut_chunk(self.chunk_steps, 0);
         }
         let flags = end_flags?;
-        let chunk = if n_records > 0 { self.cut_chunk(n_records, flags) } else { None };
+        let chunk = if n_records > 0 {
+            self.cut_chunk(n_records, flags)
+        } else {
+            None
+        };
         self.finish_episode();
         chunk
     }
@@ -212,15 +235,23 @@ impl Actor {
         header.episode_id = episode.id;
         header.phi_version = self.stats.phi_version;
         episode.next_chunk_index += 1;
-        Some(Chunk { header, records: cut.records })
+        Some(Chunk {
+            header,
+            records: cut.records,
+        })
     }
 
     fn start_episode(&mut self) -> Result<(), ActorError> {
         let index = self.n_episodes_started;
-        let id = episode_id(self.actor_id, index)
-            .ok_or(ActorError::EpisodeIdsExhausted { actor_id: self.actor_id.0, n_episodes: index })?;
+        let id = episode_id(self.actor_id, index).ok_or(ActorError::EpisodeIdsExhausted {
+            actor_id: self.actor_id.0,
+            n_episodes: index,
+        })?;
         self.n_episodes_started += 1;
-        let reset = self.rollout.env.reset(env_seed(self.seed, self.actor_id, index));
+        let reset = self
+            .rollout
+            .env
+            .reset(env_seed(self.seed, self.actor_id, index));
         let phi = self.rollout.nets.phi_rows(&reset.obs, 1)?;
         let source = SubgoalSource::for_training_episode(index, self.random_episodes);
         self.episode = Some(Episode::new(id, source, reset, phi));
@@ -235,7 +266,10 @@ impl Actor {
         let outcome = episode.step(&mut self.rollout)?;
         self.stats.env_steps += 1;
         match outcome {
-            StepOutcome::Recorded(_) => self.buffer.push(&self.rollout.record, env_step, self.stats.policy_version),
+            StepOutcome::Recorded(_) => {
+                self.buffer
+                    .push(&self.rollout.record, env_step, self.stats.policy_version)
+            }
             StepOutcome::PhysicsFailure => tracing::warn!(
                 actor = self.actor_id.0,
                 episode = episode.id.0,
@@ -282,14 +316,21 @@ impl Actor {
         self.stats.policy_version = header.policy_version;
         self.stats.phi_version = header.phi_version;
         if let Some(episode) = self.episode.as_mut() {
-            episode.relabel_phi(&mut self.rollout.nets, &self.rollout.writer, self.buffer.records_mut())?;
+            episode.relabel_phi(
+                &mut self.rollout.nets,
+                &self.rollout.writer,
+                self.buffer.records_mut(),
+            )?;
         }
         Ok(())
     }
 
     /// Counters for metrics.
     pub fn stats(&self) -> ActorStats {
-        ActorStats { n_physics_failures: self.rollout.env.n_physics_failures(), ..self.stats }
+        ActorStats {
+            n_physics_failures: self.rollout.env.n_physics_failures(),
+            ..self.stats
+        }
     }
 }
 
@@ -297,7 +338,8 @@ impl Actor {
 /// low policy squashes to one scale).
 fn symmetric_action_bound(spec: &EnvSpec) -> Result<f32, ActorError> {
     let bound = spec.action_high.first().copied().unwrap_or(0.0);
-    let symmetric = spec.action_high.iter().all(|h| *h == bound) && spec.action_low.iter().all(|l| *l == -bound);
+    let symmetric = spec.action_high.iter().all(|h| *h == bound)
+        && spec.action_low.iter().all(|l| *l == -bound);
     if symmetric && bound.is_finite() && bound > 0.0 {
         Ok(bound)
     } else {
@@ -327,7 +369,10 @@ fn rollout_params(config: &Config, spec: &EnvSpec) -> Result<RolloutParams, Acto
     if spec.goal_dim != 2 {
         return Err(ActorError::TaskMismatch {
             task: spec.name.clone(),
-            reason: format!("goal_dim = {}, but the env API's goals are 2-D", spec.goal_dim),
+            reason: format!(
+                "goal_dim = {}, but the env API's goals are 2-D",
+                spec.goal_dim
+            ),
         });
     }
     let deterministic = &config.learner.low.deterministic;

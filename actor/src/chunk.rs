@@ -70,8 +70,14 @@ impl ChunkBuffer {
         let rest = self.records[n * self.record_len..].to_vec();
         let mut records = std::mem::replace(&mut self.records, rest);
         records.truncate(n * self.record_len);
-        self.records.reserve(records.capacity().saturating_sub(self.records.len()));
-        let cut = Cut { records, n_steps: n, first_env_step: self.first_env_step, policy_version: self.policy_version };
+        self.records
+            .reserve(records.capacity().saturating_sub(self.records.len()));
+        let cut = Cut {
+            records,
+            n_steps: n,
+            first_env_step: self.first_env_step,
+            policy_version: self.policy_version,
+        };
         self.first_env_step += n as u64;
         self.policy_version = remainder_policy_version;
         cut
@@ -89,7 +95,12 @@ impl ChunkBuffer {
 }
 
 /// A header from `template` (dims, actor id, protocol version) filled in for one cut.
-pub(crate) fn header_for(template: &TrajectoryHeader, cut: &Cut, chunk_index: u32, flags: u32) -> TrajectoryHeader {
+pub(crate) fn header_for(
+    template: &TrajectoryHeader,
+    cut: &Cut,
+    chunk_index: u32,
+    flags: u32,
+) -> TrajectoryHeader {
     let mut header = *template;
     header.first_env_step = cut.first_env_step;
     header.n_steps = cut.n_steps as u32;

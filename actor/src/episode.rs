@@ -113,7 +113,9 @@ impl Episode {
         let step = rollout.env.step(&rollout.action)?;
         self.t += 1;
         if step.info.physics_failure {
-            let flags = TrajectoryFlags::EPISODE_END | TrajectoryFlags::TERMINATED | TrajectoryFlags::PHYSICS_FAILURE;
+            let flags = TrajectoryFlags::EPISODE_END
+                | TrajectoryFlags::TERMINATED
+                | TrajectoryFlags::PHYSICS_FAILURE;
             self.end_flags = Some(flags);
             return Ok(StepOutcome::PhysicsFailure);
         }
@@ -126,8 +128,16 @@ impl Episode {
         self.phi = next_phi;
         if step.terminated || truncated {
             let mut flags = TrajectoryFlags::EPISODE_END;
-            flags |= if step.terminated { TrajectoryFlags::TERMINATED } else { 0 };
-            flags |= if truncated { TrajectoryFlags::TRUNCATED } else { 0 };
+            flags |= if step.terminated {
+                TrajectoryFlags::TERMINATED
+            } else {
+                0
+            };
+            flags |= if truncated {
+                TrajectoryFlags::TRUNCATED
+            } else {
+                0
+            };
             self.end_flags = Some(flags);
         }
         Ok(StepOutcome::Recorded(self.end_flags))
@@ -138,8 +148,17 @@ impl Episode {
         if self.t % rollout.params.c != 0 {
             return Ok(DecisionKind::None);
         }
-        let inputs = DecisionInputs { obs: &self.obs, goal: &self.goal, abs_range: rollout.params.abs_range };
-        self.source.decide(&inputs, &mut rollout.nets, &mut rollout.rng, &mut self.delta)?;
+        let inputs = DecisionInputs {
+            obs: &self.obs,
+            goal: &self.goal,
+            abs_range: rollout.params.abs_range,
+        };
+        self.source.decide(
+            &inputs,
+            &mut rollout.nets,
+            &mut rollout.rng,
+            &mut self.delta,
+        )?;
         self.decision_obs.copy_from_slice(&self.obs);
         for ((sg, phi), delta) in self.subgoal.iter_mut().zip(&self.phi).zip(&self.delta) {
             *sg = phi + delta;
@@ -151,7 +170,12 @@ impl Episode {
     /// bounds, into `rollout.action`.
     fn choose_action(&self, rollout: &mut Rollout) -> Result<(), ActorError> {
         let head = rollout.nets.low_head(&self.obs, &self.phi, &self.subgoal)?;
-        low_action(&head, rollout.params.noise, &mut rollout.rng, &mut rollout.action);
+        low_action(
+            &head,
+            rollout.params.noise,
+            &mut rollout.rng,
+            &mut rollout.action,
+        );
         let params = &rollout.params;
         clip(&mut rollout.action, &params.action_low, &params.action_high);
         Ok(())
@@ -165,7 +189,11 @@ impl Episode {
         decision: DecisionKind,
         truncated: bool,
     ) -> Result<(), ActorError> {
-        let high_action = if decision.is_decision() { &self.delta } else { &rollout.zeros };
+        let high_action = if decision.is_decision() {
+            &self.delta
+        } else {
+            &rollout.zeros
+        };
         let fields = StepFields {
             obs: &self.obs,
             next_obs: &step.obs,
@@ -182,11 +210,14 @@ impl Episode {
             terminated: step.terminated,
             truncated,
         };
-        rollout.writer.write(&fields, &mut rollout.record).map_err(|bad| ActorError::NonFinite {
-            field: bad.field,
-            index: bad.index,
-            value: bad.value,
-        })
+        rollout
+            .writer
+            .write(&fields, &mut rollout.record)
+            .map_err(|bad| ActorError::NonFinite {
+                field: bad.field,
+                index: bad.index,
+                value: bad.value,
+            })
     }
 
     /// Recomputes every φ-dependent value under new encoder weights: `phi`, the re-anchored
@@ -201,7 +232,12 @@ impl Episode {
         let latent = self.phi.len();
         let fresh = nets.phi_rows(&[&self.obs[..], &self.decision_obs[..]].concat(), 2)?;
         self.phi.copy_from_slice(&fresh[..latent]);
-        for ((sg, phi_d), delta) in self.subgoal.iter_mut().zip(&fresh[latent..]).zip(&self.delta) {
+        for ((sg, phi_d), delta) in self
+            .subgoal
+            .iter_mut()
+            .zip(&fresh[latent..])
+            .zip(&self.delta)
+        {
             *sg = phi_d + delta;
         }
         for record in records {

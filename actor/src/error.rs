@@ -47,7 +47,9 @@ pub enum ActorError {
     },
     /// A weights message was refused; nothing changed (counted in
     /// [`crate::ActorStats::n_weights_rejected`]).
-    #[error("weights (policy version {policy_version}, φ version {phi_version}) rejected: {reason}")]
+    #[error(
+        "weights (policy version {policy_version}, φ version {phi_version}) rejected: {reason}"
+    )]
     WeightsRejected {
         /// Policy version carried by the refused message.
         policy_version: u64,

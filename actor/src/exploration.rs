@@ -56,10 +56,17 @@ fn deterministic_with_noise(
 }
 
 /// The low level's exploratory action for `head`.
-pub(crate) fn low_action(head: &LowHead, noise: DeterministicNoise, rng: &mut Pcg64Mcg, out: &mut [f32]) {
+pub(crate) fn low_action(
+    head: &LowHead,
+    noise: DeterministicNoise,
+    rng: &mut Pcg64Mcg,
+    out: &mut [f32],
+) {
     match head {
         LowHead::Gaussian(head) => sample_gaussian(head, rng, out),
-        LowHead::Deterministic { action, scale } => deterministic_with_noise(action, *scale, noise, rng, out),
+        LowHead::Deterministic { action, scale } => {
+            deterministic_with_noise(action, *scale, noise, rng, out)
+        }
     }
 }
 
@@ -79,7 +86,10 @@ mod tests {
     #[test]
     fn deterministic_noise_stays_in_bounds_and_sometimes_goes_uniform() {
         let mut rng = Pcg64Mcg::seed_from_u64(3);
-        let noise = DeterministicNoise { noise_scale: 0.2, random_eps: 0.5 };
+        let noise = DeterministicNoise {
+            noise_scale: 0.2,
+            random_eps: 0.5,
+        };
         let mut out = [0.0; 4];
         let mut far = 0;
         for _ in 0..200 {
@@ -87,7 +97,10 @@ mod tests {
             assert!(out.iter().all(|a| a.abs() <= 1.0));
             far += usize::from((out[2]).abs() > 0.8);
         }
-        assert!(far > 5, "uniform replacement should sometimes move a zero mean far: {far}");
+        assert!(
+            far > 5,
+            "uniform replacement should sometimes move a zero mean far: {far}"
+        );
     }
 
     #[test]

@@ -74,7 +74,13 @@ impl ActorNets {
         let active = NetSlot::build(spec, seed, &device)?;
         let staging = NetSlot::build(spec, seed, &device)?;
         let layout_hash = nets::layout_hash(&active.varmap);
-        Ok(Self { active, staging, layout_hash, device, input: Vec::new() })
+        Ok(Self {
+            active,
+            staging,
+            layout_hash,
+            device,
+            input: Vec::new(),
+        })
     }
 
     /// Layout hash of the actor-side tensors (names and shapes).
@@ -95,7 +101,11 @@ impl ActorNets {
             self.input.extend_from_slice(part);
         }
         let width = self.input.len() / rows.max(1);
-        Ok(Tensor::from_slice(&self.input, (rows, width), &self.device)?)
+        Ok(Tensor::from_slice(
+            &self.input,
+            (rows, width),
+            &self.device,
+        )?)
     }
 
     /// φ of each of `rows` observations laid out back to back in `obs`; returns the latent
@@ -113,13 +123,22 @@ impl ActorNets {
     }
 
     /// The low policy's head on `[obs, φ(obs), subgoal]`.
-    pub fn low_head(&mut self, obs: &[f32], phi: &[f32], subgoal: &[f32]) -> Result<LowHead, ActorError> {
+    pub fn low_head(
+        &mut self,
+        obs: &[f32],
+        phi: &[f32],
+        subgoal: &[f32],
+    ) -> Result<LowHead, ActorError> {
         let x = self.input_tensor(&[obs, phi, subgoal], 1)?;
         match &self.active.set.low {
-            LowPolicy::Gaussian(policy) => Ok(LowHead::Gaussian(gaussian_head(policy.dist(&x)?, policy.scale())?)),
-            LowPolicy::Deterministic(policy) => {
-                Ok(LowHead::Deterministic { action: flat(&policy.forward(&x)?)?, scale: policy.scale() as f32 })
-            }
+            LowPolicy::Gaussian(policy) => Ok(LowHead::Gaussian(gaussian_head(
+                policy.dist(&x)?,
+                policy.scale(),
+            )?)),
+            LowPolicy::Deterministic(policy) => Ok(LowHead::Deterministic {
+                action: flat(&policy.forward(&x)?)?,
+                scale: policy.scale() as f32,
+            }),
         }
     }
 
@@ -138,13 +157,23 @@ fn flat(t: &Tensor) -> Result<Vec<f32>, ActorError> {
     Ok(t.flatten_all()?.to_vec1::<f32>()?)
 }
 
-fn gaussian_head((mean, log_std): (Tensor, Tensor), scale: f64) -> Result<GaussianHead, ActorError> {
-    Ok(GaussianHead { mean: flat(&mean)?, log_std: flat(&log_std)?, scale: scale as f32 })
+fn gaussian_head(
+    (mean, log_std): (Tensor, Tensor),
+    scale: f64,
+) -> Result<GaussianHead, ActorError> {
+    Ok(GaussianHead {
+        mean: flat(&mean)?,
+        log_std: flat(&log_std)?,
+        scale: scale as f32,
+    })
 }
 
 /// `Err` naming the first tensor (in name order) that holds NaN or infinity.
 fn check_finite(varmap: &VarMap) -> Result<(), WeightsRejection> {
-    let data = varmap.data().lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let data = varmap
+        .data()
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
     let mut names: Vec<&String> = data.keys().collect();
     names.sort_unstable();
     for name in names {
@@ -187,13 +216,18 @@ mod tests {
         let mut ours = [0.0f32; 2];
         sample_gaussian(&head, &mut Pcg64Mcg::seed_from_u64(9), &mut ours);
         let mut rng = Pcg64Mcg::seed_from_u64(9);
-        let eps: Vec<f32> = (0..2).map(|_| rand::Rng::sample(&mut rng, StandardNormal)).collect();
+        let eps: Vec<f32> = (0..2)
+            .map(|_| rand::Rng::sample(&mut rng, StandardNormal))
+            .collect();
         let x = Tensor::from_slice(&[&obs[..], &goal[..]].concat(), (1, 6), &Device::Cpu).unwrap();
         let eps = Tensor::from_slice(&eps, (1, 2), &Device::Cpu).unwrap();
         let (reference, _) = nets.active.set.high.sample(&x, &eps).unwrap();
         let reference = flat(&reference).unwrap();
         for (a, b) in ours.iter().zip(&reference) {
-            assert!((a - b).abs() <= 1e-5 * b.abs().max(1.0), "ours {ours:?} vs nets {reference:?}");
+            assert!(
+                (a - b).abs() <= 1e-5 * b.abs().max(1.0),
+                "ours {ours:?} vs nets {reference:?}"
+            );
         }
     }
 

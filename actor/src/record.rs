@@ -36,8 +36,17 @@ pub(crate) struct NonFiniteField {
 }
 
 /// Names of the vector fields, in record order.
-const VECTOR_FIELDS: [&str; 9] =
-    ["obs", "next_obs", "phi", "next_phi", "subgoal", "high_action", "action", "goal", "achieved_goal"];
+const VECTOR_FIELDS: [&str; 9] = [
+    "obs",
+    "next_obs",
+    "phi",
+    "next_phi",
+    "subgoal",
+    "high_action",
+    "action",
+    "goal",
+    "achieved_goal",
+];
 /// Names of the scalar fields, in record order.
 const SCALAR_FIELDS: [&str; 5] = ["reward", "decision", "success", "terminated", "truncated"];
 
@@ -52,9 +61,9 @@ impl RecordWriter {
     /// Looks up every field's range in `layout`.
     pub fn new(layout: StepLayout) -> Result<Self, ProtocolError> {
         let range = |name: &str| {
-            layout
-                .field(name)
-                .ok_or_else(|| ProtocolError::InvalidDims(format!("step layout has no field `{name}`")))
+            layout.field(name).ok_or_else(|| {
+                ProtocolError::InvalidDims(format!("step layout has no field `{name}`"))
+            })
         };
         let mut vectors: [Range<usize>; 9] = Default::default();
         for (slot, name) in vectors.iter_mut().zip(VECTOR_FIELDS) {
@@ -87,8 +96,13 @@ impl RecordWriter {
         }
         check_finite("reward", &[step.reward])?;
         let flag = |b: bool| f32::from(u8::from(b));
-        let scalars =
-            [step.reward, step.decision.code() as f32, flag(step.success), flag(step.terminated), flag(step.truncated)];
+        let scalars = [
+            step.reward,
+            step.decision.code() as f32,
+            flag(step.success),
+            flag(step.terminated),
+            flag(step.truncated),
+        ];
         for (offset, value) in self.scalars.iter().zip(scalars) {
             out[*offset] = value;
         }
@@ -116,7 +130,11 @@ impl RecordWriter {
 
 fn check_finite(field: &'static str, values: &[f32]) -> Result<(), NonFiniteField> {
     match values.iter().position(|v| !v.is_finite()) {
-        Some(index) => Err(NonFiniteField { field, index, value: values[index] }),
+        Some(index) => Err(NonFiniteField {
+            field,
+            index,
+            value: values[index],
+        }),
         None => Ok(()),
     }
 }

@@ -8,7 +8,8 @@ use envs::api::{Env, EnvError, EnvSpec, Reset, Step};
 use envs::maze::Maze;
 use protocol::config::LowAlgo;
 use protocol::{
-    ActorId, Config, DecisionKind, PhiVersion, PolicyVersion, StepRecord, TrajectoryFlags as F, WeightsHeader,
+    ActorId, Config, DecisionKind, PhiVersion, PolicyVersion, StepRecord, TrajectoryFlags as F,
+    WeightsHeader,
 };
 
 /// Point maze U, small networks, c = 10, episodes of `episode_length` steps cut every
@@ -27,8 +28,13 @@ fn config(chunk_steps: u32, episode_length: u32) -> Config {
 }
 
 fn decode(chunk: &Chunk) -> Vec<StepRecord> {
-    let layout = chunk.header.check(chunk.records.len()).expect("header matches payload");
-    let views = layout.view_chunk(&chunk.records, chunk.header.n_steps as usize).expect("records decode");
+    let layout = chunk
+        .header
+        .check(chunk.records.len())
+        .expect("header matches payload");
+    let views = layout
+        .view_chunk(&chunk.records, chunk.header.n_steps as usize)
+        .expect("records decode");
     views.iter().map(|v| v.to_record()).collect()
 }
 
@@ -61,7 +67,10 @@ fn chunks_have_the_configured_lengths_and_every_record_decodes() {
             let h = &chunk.header;
             assert_eq!(h.step_layout().unwrap(), actor.layout());
             assert_eq!(h.actor_id, ActorId(3));
-            assert_eq!(chunk.records.len(), h.n_steps as usize * actor.layout().record_len());
+            assert_eq!(
+                chunk.records.len(),
+                h.n_steps as usize * actor.layout().record_len()
+            );
             decode(chunk);
         }
     }
@@ -81,16 +90,27 @@ fn chunk_indices_increment_and_flags_mark_each_episode_start_and_end_once() {
         let mut next_step = 0;
         for (i, chunk) in episode.iter().enumerate() {
             let h = &chunk.header;
-            assert_eq!((h.episode_id, h.chunk_index, h.first_env_step), (id, i as u32, next_step));
+            assert_eq!(
+                (h.episode_id, h.chunk_index, h.first_env_step),
+                (id, i as u32, next_step)
+            );
             next_step += u64::from(h.n_steps);
             assert_eq!(h.flags.contains(F::EPISODE_START), i == 0);
             assert_eq!(h.flags.contains(F::EPISODE_END), i + 1 == episode.len());
         }
         let last = episode.last().unwrap();
-        assert!(last.header.flags.contains(F::TRUNCATED) && !last.header.flags.contains(F::TERMINATED));
+        assert!(
+            last.header.flags.contains(F::TRUNCATED) && !last.header.flags.contains(F::TERMINATED)
+        );
         let records = records_of(episode);
         assert!(records.last().unwrap().truncated);
-        assert_eq!(records.iter().filter(|r| r.truncated || r.terminated).count(), 1);
+        assert_eq!(
+            records
+                .iter()
+                .filter(|r| r.truncated || r.terminated)
+                .count(),
+            1
+        );
     }
     ids.dedup();
     assert_eq!(ids.len(), 3, "episode ids are distinct");
@@ -112,21 +132,31 @@ fn phi_of_each_step_is_the_next_phi_of_the_step_before() {
 fn the_subgoal_is_held_for_c_steps_and_changes_only_on_decision_steps() {
     let mut actor = Actor::new(&config(30, 100), ActorId(0), 4).unwrap();
     for (e, episode) in episodes(&mut actor, 2).iter().enumerate() {
-        let expected_kind = if e == 0 { DecisionKind::Random } else { DecisionKind::Policy };
+        let expected_kind = if e == 0 {
+            DecisionKind::Random
+        } else {
+            DecisionKind::Policy
+        };
         let records = records_of(episode);
         for (t, r) in records.iter().enumerate() {
             if t % 10 == 0 {
                 assert_eq!(r.decision, expected_kind, "step {t}");
                 assert!(r.high_action.iter().all(|d| d.abs() <= 10.0));
                 for ((d, sg), phi) in r.high_action.iter().zip(&r.subgoal).zip(&r.phi) {
-                    assert!((d - (sg - phi)).abs() <= 1e-4 * sg.abs().max(1.0), "step {t}: {r:?}");
+                    assert!(
+                        (d - (sg - phi)).abs() <= 1e-4 * sg.abs().max(1.0),
+                        "step {t}: {r:?}"
+                    );
                 }
             } else {
                 assert_eq!(r.decision, DecisionKind::None, "step {t}");
                 assert!(r.high_action.iter().all(|d| *d == 0.0));
                 assert_eq!(r.subgoal, records[t - 1].subgoal, "step {t}");
             }
-            assert!(r.action.iter().all(|a| a.abs() <= 1.0), "actions are clipped to the point's bound");
+            assert!(
+                r.action.iter().all(|a| a.abs() <= 1.0),
+                "actions are clipped to the point's bound"
+            );
         }
     }
 }
@@ -135,7 +165,9 @@ fn the_subgoal_is_held_for_c_steps_and_changes_only_on_decision_steps() {
 fn the_same_seed_gives_identical_chunks_and_another_seed_does_not() {
     let run = |actor_id, seed| {
         let mut actor = Actor::new(&config(30, 100), ActorId(actor_id), seed).unwrap();
-        (0..9).map(|_| actor.next_chunk().unwrap()).collect::<Vec<_>>()
+        (0..9)
+            .map(|_| actor.next_chunk().unwrap())
+            .collect::<Vec<_>>()
     };
     assert_eq!(run(2, 11), run(2, 11));
     assert_ne!(run(2, 11)[0].records, run(2, 12)[0].records);
@@ -151,7 +183,9 @@ fn the_deterministic_low_variant_acts_within_bounds() {
     let mut actor = Actor::new(&config, ActorId(0), 5).unwrap();
     let records = records_of(&episodes(&mut actor, 1)[0]);
     assert_eq!(records.len(), 100);
-    assert!(records.iter().all(|r| r.action.iter().all(|a| a.abs() <= 1.0)));
+    assert!(records
+        .iter()
+        .all(|r| r.action.iter().all(|a| a.abs() <= 1.0)));
 }
 
 #[test]
@@ -212,7 +246,14 @@ impl Env for FailingEnv {
 
 fn failing_actor(fail_at: u32, every_episode: bool) -> Actor {
     let inner = envs::registry::make("pointmaze-u").unwrap();
-    let env = FailingEnv { inner, fail_at, every_episode, n_resets: 0, t: 0, n_failures: 0 };
+    let env = FailingEnv {
+        inner,
+        fail_at,
+        every_episode,
+        n_resets: 0,
+        t: 0,
+        n_failures: 0,
+    };
     Actor::with_env(&config(30, 100), ActorId(0), 6, Box::new(env)).unwrap()
 }
 
@@ -223,21 +264,33 @@ fn a_physics_failure_on_a_chunk_boundary_still_ends_the_episode_in_a_non_empty_c
     let lengths: Vec<u32> = episode.iter().map(|c| c.header.n_steps).collect();
     assert_eq!(lengths, [30, 30], "the failing step 60 is not recorded");
     let end = episode[1].header.flags;
-    assert!(end.contains(F::EPISODE_END | F::TERMINATED | F::PHYSICS_FAILURE), "{end:?}");
+    assert!(
+        end.contains(F::EPISODE_END | F::TERMINATED | F::PHYSICS_FAILURE),
+        "{end:?}"
+    );
     assert!(!episode[0].header.flags.contains(F::PHYSICS_FAILURE));
     assert!(records_of(episode).iter().all(|r| !r.terminated));
     let stats = actor.stats();
-    assert_eq!((stats.n_physics_failures, stats.episodes, stats.env_steps), (1, 1, 61));
+    assert_eq!(
+        (stats.n_physics_failures, stats.episodes, stats.env_steps),
+        (1, 1, 61)
+    );
 }
 
 #[test]
 fn a_physics_failure_on_the_first_step_yields_no_chunk_and_the_next_episode_follows() {
     let mut actor = failing_actor(0, false);
     let chunk = actor.next_chunk().unwrap();
-    assert_eq!(chunk.header.episode_id.0, 1, "episode 0 left nothing to send");
+    assert_eq!(
+        chunk.header.episode_id.0, 1,
+        "episode 0 left nothing to send"
+    );
     assert_eq!(chunk.header.chunk_index, 0);
     assert!(chunk.header.flags.contains(F::EPISODE_START));
-    assert_eq!((actor.stats().n_physics_failures, actor.stats().episodes), (1, 1));
+    assert_eq!(
+        (actor.stats().n_physics_failures, actor.stats().episodes),
+        (1, 1)
+    );
 }
 
 #[test]
@@ -252,11 +305,19 @@ fn foreign_weights(actor: &Actor, seed: u64) -> (Vec<u8>, u64) {
     let varmap = VarMap::new();
     let vb = nets::seeded_var_builder(&varmap, seed, &Device::Cpu);
     nets::PolicySet::new(actor.nets_spec(), &vb).unwrap();
-    (nets::to_safetensors_bytes(&varmap).unwrap(), nets::layout_hash(&varmap))
+    (
+        nets::to_safetensors_bytes(&varmap).unwrap(),
+        nets::layout_hash(&varmap),
+    )
 }
 
 fn header(policy: u64, phi: u64, layout_hash: u64, bytes: &[u8]) -> WeightsHeader {
-    WeightsHeader::new(PolicyVersion(policy), PhiVersion(phi), layout_hash, bytes.len())
+    WeightsHeader::new(
+        PolicyVersion(policy),
+        PhiVersion(phi),
+        layout_hash,
+        bytes.len(),
+    )
 }
 
 #[test]
@@ -266,10 +327,15 @@ fn weights_of_another_policy_set_load_and_change_the_actions() {
     let mut loaded = Actor::new(&config, ActorId(0), 7).unwrap();
     let (bytes, hash) = foreign_weights(&loaded, 99);
     assert_eq!(hash, loaded.layout_hash());
-    loaded.load_weights(&header(4, 2, hash, &bytes), &bytes).unwrap();
+    loaded
+        .load_weights(&header(4, 2, hash, &bytes), &bytes)
+        .unwrap();
     assert_eq!(loaded.weights_bytes().unwrap(), bytes);
     let stats = loaded.stats();
-    assert_eq!((stats.policy_version, stats.phi_version), (PolicyVersion(4), PhiVersion(2)));
+    assert_eq!(
+        (stats.policy_version, stats.phi_version),
+        (PolicyVersion(4), PhiVersion(2))
+    );
     let (a, b) = (plain.next_chunk().unwrap(), loaded.next_chunk().unwrap());
     let (a, b) = (decode(&a), decode(&b));
     assert_eq!(a[0].obs, b[0].obs, "same env seed, same start");
@@ -282,27 +348,42 @@ fn a_load_mid_episode_relabels_phi_and_versions_the_following_chunks() {
     let mut actor = Actor::new(&config(30, 100), ActorId(0), 8).unwrap();
     let first = actor.next_chunk().unwrap();
     let (bytes, hash) = foreign_weights(&actor, 5);
-    actor.load_weights(&header(1, 1, hash, &bytes), &bytes).unwrap();
+    actor
+        .load_weights(&header(1, 1, hash, &bytes), &bytes)
+        .unwrap();
     let second = actor.next_chunk().unwrap();
     let third = actor.next_chunk().unwrap();
     // The second chunk's first step was acted before the load: its policy version is still 0,
     // but every φ value in it is from the new encoder.
-    assert_eq!((second.header.policy_version, second.header.phi_version), (PolicyVersion(0), PhiVersion(1)));
-    assert_eq!((third.header.policy_version, third.header.phi_version), (PolicyVersion(1), PhiVersion(1)));
+    assert_eq!(
+        (second.header.policy_version, second.header.phi_version),
+        (PolicyVersion(0), PhiVersion(1))
+    );
+    assert_eq!(
+        (third.header.policy_version, third.header.phi_version),
+        (PolicyVersion(1), PhiVersion(1))
+    );
     let records: Vec<StepRecord> = [&second, &third].into_iter().flat_map(decode).collect();
     for pair in records.windows(2) {
         assert_eq!(pair[1].phi, pair[0].next_phi);
     }
     let before = decode(&first);
     assert_eq!(records[0].obs, before.last().unwrap().next_obs);
-    assert_ne!(records[0].phi, before.last().unwrap().next_phi, "relabelled under the new φ");
+    assert_ne!(
+        records[0].phi,
+        before.last().unwrap().next_phi,
+        "relabelled under the new φ"
+    );
     for (t, r) in records.iter().enumerate() {
         let t = t + 30;
         if t % 10 != 0 {
             continue;
         }
         for ((d, sg), phi) in r.high_action.iter().zip(&r.subgoal).zip(&r.phi) {
-            assert!((d - (sg - phi)).abs() <= 1e-4 * sg.abs().max(1.0), "step {t}: {r:?}");
+            assert!(
+                (d - (sg - phi)).abs() <= 1e-4 * sg.abs().max(1.0),
+                "step {t}: {r:?}"
+            );
         }
     }
 }
@@ -326,12 +407,19 @@ fn weights_with_a_wrong_hash_version_length_or_content_are_refused_and_change_no
         (old_protocol, &bytes, "protocol version"),
         (header(1, 1, hash, &bytes[..10]), &bytes, "length"),
         (header(1, 1, hash, &garbage), &garbage, "safetensors"),
-        (header(1, 1, other_hash, &other_bytes), &other_bytes, "layout hash"),
+        (
+            header(1, 1, other_hash, &other_bytes),
+            &other_bytes,
+            "layout hash",
+        ),
     ];
     for (n, (header, payload, what)) in cases.into_iter().enumerate() {
         let err = actor.load_weights(&header, payload).unwrap_err();
         assert!(matches!(err, ActorError::WeightsRejected { .. }));
-        assert!(err.to_string().contains(what), "expected `{what}` in: {err}");
+        assert!(
+            err.to_string().contains(what),
+            "expected `{what}` in: {err}"
+        );
         assert_eq!(actor.stats().n_weights_rejected, n as u64 + 1);
     }
     assert_eq!(actor.stats().policy_version, PolicyVersion(0));
@@ -355,7 +443,9 @@ fn weights_holding_nan_are_refused_and_change_nothing() {
         var.set(&nan).unwrap();
     }
     let bytes = nets::to_safetensors_bytes(&varmap).unwrap();
-    let err = actor.load_weights(&header(1, 1, actor.layout_hash(), &bytes), &bytes).unwrap_err();
+    let err = actor
+        .load_weights(&header(1, 1, actor.layout_hash(), &bytes), &bytes)
+        .unwrap_err();
     assert!(err.to_string().contains("low_policy.mean.bias"), "{err}");
     for _ in 0..3 {
         assert_eq!(reference.next_chunk().unwrap(), actor.next_chunk().unwrap());
