@@ -20,8 +20,15 @@ pub struct Encoder {
 
 impl Encoder {
     /// `obs_dim → hidden… → latent_dim` with ReLU between layers.
-    pub fn new(vb: &VarBuilder, obs_dim: usize, hidden: &[usize], latent_dim: usize) -> Result<Self> {
-        Ok(Self { mlp: Mlp::new(vb, obs_dim, hidden, latent_dim, LinearInit::TorchDefault)? })
+    pub fn new(
+        vb: &VarBuilder,
+        obs_dim: usize,
+        hidden: &[usize],
+        latent_dim: usize,
+    ) -> Result<Self> {
+        Ok(Self {
+            mlp: Mlp::new(vb, obs_dim, hidden, latent_dim, LinearInit::TorchDefault)?,
+        })
     }
 
     /// `[batch, obs_dim]` → `[batch, latent_dim]`.

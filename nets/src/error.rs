@@ -55,7 +55,9 @@ pub enum NetsError {
         shape: Vec<usize>,
     },
     /// A tensor's shape differs between the payload and the receiving parameter set.
-    #[error("tensor `{name}`: shape {got:?} in the payload, but the parameter set expects {expected:?}")]
+    #[error(
+        "tensor `{name}`: shape {got:?} in the payload, but the parameter set expects {expected:?}"
+    )]
     ShapeMismatch {
         /// Parameter name.
         name: String,
@@ -65,7 +67,9 @@ pub enum NetsError {
         got: Vec<usize>,
     },
     /// A tensor's element type differs from the receiving parameter's.
-    #[error("tensor `{name}`: dtype {got} in the payload, but the parameter set expects {expected}")]
+    #[error(
+        "tensor `{name}`: dtype {got} in the payload, but the parameter set expects {expected}"
+    )]
     DType {
         /// Parameter name.
         name: String,

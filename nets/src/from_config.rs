@@ -21,7 +21,11 @@ pub struct TaskDims {
 /// Builds and validates the network spec of a run.
 pub fn spec_from_config(config: &Config, task: TaskDims) -> Result<NetsSpec> {
     let (low_variant, low_hidden, low_critic_hidden) = match config.learner.low.algo {
-        LowAlgo::Sac => (LowVariant::Sac, config.learner.low.hidden.clone(), config.learner.low.hidden.clone()),
+        LowAlgo::Sac => (
+            LowVariant::Sac,
+            config.learner.low.hidden.clone(),
+            config.learner.low.hidden.clone(),
+        ),
         LowAlgo::Deterministic => (
             LowVariant::Deterministic,
             config.learner.low.deterministic.actor_hidden.clone(),
@@ -49,7 +53,12 @@ pub fn spec_from_config(config: &Config, task: TaskDims) -> Result<NetsSpec> {
 mod tests {
     use super::*;
 
-    const ANT: TaskDims = TaskDims { obs_dim: 29, goal_dim: 2, action_dim: 8, action_scale: 16.0 };
+    const ANT: TaskDims = TaskDims {
+        obs_dim: 29,
+        goal_dim: 2,
+        action_dim: 8,
+        action_scale: 16.0,
+    };
 
     #[test]
     fn the_default_config_gives_the_default_ant_spec() {

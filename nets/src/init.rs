@@ -41,7 +41,10 @@ impl LinearInit {
             Self::XavierUniform => (6.0 / (fan_in + fan_out) as f64).sqrt(),
             Self::TorchDefault => 1.0 / (fan_in as f64).sqrt(),
         };
-        Init::Uniform { lo: -bound, up: bound }
+        Init::Uniform {
+            lo: -bound,
+            up: bound,
+        }
     }
 
     /// The initialiser of a bias of a layer with `fan_in` inputs.
@@ -50,7 +53,10 @@ impl LinearInit {
             Self::XavierUniform => Init::Const(0.0),
             Self::TorchDefault => {
                 let bound = 1.0 / (fan_in as f64).sqrt();
-                Init::Uniform { lo: -bound, up: bound }
+                Init::Uniform {
+                    lo: -bound,
+                    up: bound,
+                }
             }
         }
     }
@@ -75,16 +81,23 @@ struct SeededVarMap {
 
 impl SeededVarMap {
     /// Draws the initial value of `name` from the hint `init`.
-    fn sample(&self, shape: &Shape, name: &str, init: Init, device: &Device) -> candle_core::Result<Tensor> {
+    fn sample(
+        &self,
+        shape: &Shape,
+        name: &str,
+        init: Init,
+        device: &Device,
+    ) -> candle_core::Result<Tensor> {
         let n = shape.elem_count();
         let values: Vec<f32> = match init {
             Init::Const(c) => vec![c as f32; n],
             Init::Uniform { lo, up } => {
-                let mut rng = self
-                    .rng
-                    .lock()
-                    .map_err(|_| candle_core::Error::Msg("seeded init: RNG mutex poisoned".into()))?;
-                (0..n).map(|_| (lo + (up - lo) * rng.random::<f64>()) as f32).collect()
+                let mut rng = self.rng.lock().map_err(|_| {
+                    candle_core::Error::Msg("seeded init: RNG mutex poisoned".into())
+                })?;
+                (0..n)
+                    .map(|_| (lo + (up - lo) * rng.random::<f64>()) as f32)
+                    .collect()
             }
             other => candle_core::bail!(
                 "seeded init of `{name}`: only Const and Uniform hints are supported, got {other:?}"
@@ -110,7 +123,10 @@ impl SimpleBackend for SeededVarMap {
             .map_err(|_| candle_core::Error::Msg("VarMap mutex poisoned".into()))?;
         if let Some(var) = data.get(name) {
             if var.shape() != &shape {
-                candle_core::bail!("shape mismatch on {name}: requested {shape:?}, stored {:?}", var.shape())
+                candle_core::bail!(
+                    "shape mismatch on {name}: requested {shape:?}, stored {:?}",
+                    var.shape()
+                )
             }
             return Ok(var.as_tensor().clone());
         }
@@ -121,11 +137,22 @@ impl SimpleBackend for SeededVarMap {
         Ok(tensor)
     }
 
-    fn get_unchecked(&self, name: &str, _dtype: DType, _device: &Device) -> candle_core::Result<Tensor> {
-        candle_core::bail!("`get_unchecked({name})` is not supported by the seeded VarMap backend, use `get`")
+    fn get_unchecked(
+        &self,
+        name: &str,
+        _dtype: DType,
+        _device: &Device,
+    ) -> candle_core::Result<Tensor> {
+        candle_core::bail!(
+            "`get_unchecked({name})` is not supported by the seeded VarMap backend, use `get`"
+        )
     }
 
     fn contains_tensor(&self, name: &str) -> bool {
-        self.varmap.data().lock().map(|d| d.contains_key(name)).unwrap_or(false)
+        self.varmap
+            .data()
+            .lock()
+            .map(|d| d.contains_key(name))
+            .unwrap_or(false)
     }
 }

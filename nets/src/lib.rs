@@ -16,8 +16,8 @@
 
 pub mod critic;
 pub mod encoder;
-pub mod from_config;
 pub mod error;
+pub mod from_config;
 pub mod init;
 pub mod linear;
 pub mod mlp;
@@ -27,8 +27,8 @@ pub mod weights;
 
 pub use critic::{q_from_distance, DistanceCritic, TwinCritic};
 pub use encoder::Encoder;
-pub use from_config::{spec_from_config, TaskDims};
 pub use error::{NetsError, Result};
+pub use from_config::{spec_from_config, TaskDims};
 pub use init::{seeded_var_builder, LinearInit};
 pub use linear::{EnsembleLinear, Linear};
 pub use mlp::{EnsembleMlp, Mlp};

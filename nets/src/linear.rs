@@ -36,7 +36,8 @@ pub struct Linear {
 impl Linear {
     /// Creates (or fetches, if the names exist) `weight [out, in]` and `bias [out]` under `vb`.
     pub fn new(vb: &VarBuilder, in_dim: usize, out_dim: usize, init: LinearInit) -> Result<Self> {
-        let weight = vb.get_with_hints((out_dim, in_dim), "weight", init.weight(in_dim, out_dim))?;
+        let weight =
+            vb.get_with_hints((out_dim, in_dim), "weight", init.weight(in_dim, out_dim))?;
         let bias = vb.get_with_hints(out_dim, "bias", init.bias(in_dim))?;
         let bias_row = bias.unsqueeze(0)?;
         Ok(Self {
@@ -112,7 +113,14 @@ impl EnsembleLinear {
         let w_shape = (members, out_dim, in_dim);
         let weight = vb.get_with_hints(w_shape, "weight", init.weight(in_dim, out_dim))?;
         let bias = vb.get_with_hints((members, out_dim), "bias", init.bias(in_dim))?;
-        Ok(Self { weight, bias, name: vb.prefix(), members, in_dim, out_dim })
+        Ok(Self {
+            weight,
+            bias,
+            name: vb.prefix(),
+            members,
+            in_dim,
+            out_dim,
+        })
     }
 
     /// Applies every member: `[batch, in]` or `[k, batch, in]` → `[k, batch, out]`.
@@ -123,7 +131,10 @@ impl EnsembleLinear {
             _ => Err(NetsError::Rank {
                 layer: self.name.clone(),
                 expected: 3,
-                expected_shape: format!("[{}, batch, {}] or [batch, {}]", self.members, self.in_dim, self.in_dim),
+                expected_shape: format!(
+                    "[{}, batch, {}] or [batch, {}]",
+                    self.members, self.in_dim, self.in_dim
+                ),
                 got: x.dims().to_vec(),
             }),
         }
@@ -154,8 +165,20 @@ impl EnsembleLinear {
         Ok(xw.add(&ones.matmul(&self.bias.unsqueeze(1)?)?)?)
     }
 
-    fn dim_error(&self, what: &'static str, expected: usize, got: usize, shape: &[usize]) -> NetsError {
-        NetsError::Dim { layer: self.name.clone(), what, expected, got, shape: shape.to_vec() }
+    fn dim_error(
+        &self,
+        what: &'static str,
+        expected: usize,
+        got: usize,
+        shape: &[usize],
+    ) -> NetsError {
+        NetsError::Dim {
+            layer: self.name.clone(),
+            what,
+            expected,
+            got,
+            shape: shape.to_vec(),
+        }
     }
 
     /// Number of members `k`.

@@ -25,14 +25,25 @@ pub struct Mlp {
 
 impl Mlp {
     /// `in → hidden[0] → … → hidden[n−1] → out`, ReLU after each hidden layer, linear output.
-    pub fn new(vb: &VarBuilder, in_dim: usize, hidden: &[usize], out_dim: usize, init: LinearInit) -> Result<Self> {
+    pub fn new(
+        vb: &VarBuilder,
+        in_dim: usize,
+        hidden: &[usize],
+        out_dim: usize,
+        init: LinearInit,
+    ) -> Result<Self> {
         let dims = layer_dims(&vb.prefix(), in_dim, hidden, Some(out_dim))?;
         Self::build(vb, &dims, init, false)
     }
 
     /// `in → hidden[0] → … → hidden[n−1]`, ReLU after every layer (a trunk that heads follow).
     /// `hidden` must not be empty.
-    pub fn trunk(vb: &VarBuilder, in_dim: usize, hidden: &[usize], init: LinearInit) -> Result<Self> {
+    pub fn trunk(
+        vb: &VarBuilder,
+        in_dim: usize,
+        hidden: &[usize],
+        init: LinearInit,
+    ) -> Result<Self> {
         let dims = layer_dims(&vb.prefix(), in_dim, hidden, None)?;
         Self::build(vb, &dims, init, true)
     }
@@ -94,7 +105,10 @@ impl EnsembleMlp {
         init: LinearInit,
     ) -> Result<Self> {
         if members == 0 {
-            return Err(NetsError::Spec(format!("{}: an ensemble needs at least one member", vb.prefix())));
+            return Err(NetsError::Spec(format!(
+                "{}: an ensemble needs at least one member",
+                vb.prefix()
+            )));
         }
         let dims = layer_dims(&vb.prefix(), in_dim, hidden, Some(out_dim))?;
         let layers = dims
@@ -135,16 +149,25 @@ impl EnsembleMlp {
 }
 
 /// The layer widths `[in, hidden…, out?]`, all positive; at least one layer.
-fn layer_dims(name: &str, in_dim: usize, hidden: &[usize], out_dim: Option<usize>) -> Result<Vec<usize>> {
+fn layer_dims(
+    name: &str,
+    in_dim: usize,
+    hidden: &[usize],
+    out_dim: Option<usize>,
+) -> Result<Vec<usize>> {
     let mut dims = Vec::with_capacity(hidden.len() + 2);
     dims.push(in_dim);
     dims.extend_from_slice(hidden);
     dims.extend(out_dim);
     if dims.len() < 2 {
-        return Err(NetsError::Spec(format!("{name}: a trunk needs at least one hidden layer")));
+        return Err(NetsError::Spec(format!(
+            "{name}: a trunk needs at least one hidden layer"
+        )));
     }
     if dims.contains(&0) {
-        return Err(NetsError::Spec(format!("{name}: every layer width must be positive, got {dims:?}")));
+        return Err(NetsError::Spec(format!(
+            "{name}: every layer width must be positive, got {dims:?}"
+        )));
     }
     Ok(dims)
 }

@@ -56,7 +56,13 @@ impl GaussianPolicy {
         let width = trunk.out_dim();
         let mean = Linear::new(&vb.pp("mean"), width, action_dim, init)?;
         let log_std = Linear::new(&vb.pp("log_std"), width, action_dim, init)?;
-        Ok(Self { trunk, mean, log_std, scale, name: vb.prefix() })
+        Ok(Self {
+            trunk,
+            mean,
+            log_std,
+            scale,
+            name: vb.prefix(),
+        })
     }
 
     /// The pre-squash Gaussian: `(μ, log σ)`, each `[batch, action_dim]`, log σ clamped.
@@ -135,7 +141,10 @@ impl DeterministicActor {
         init: LinearInit,
     ) -> Result<Self> {
         check_scale(&vb.prefix(), scale)?;
-        Ok(Self { mlp: Mlp::new(vb, in_dim, hidden, action_dim, init)?, scale })
+        Ok(Self {
+            mlp: Mlp::new(vb, in_dim, hidden, action_dim, init)?,
+            scale,
+        })
     }
 
     /// `[batch, in]` → `[batch, action_dim]` in `[−scale, scale]`.
@@ -163,6 +172,8 @@ fn check_scale(name: &str, scale: f64) -> Result<()> {
     if scale.is_finite() && scale > 0.0 {
         Ok(())
     } else {
-        Err(NetsError::Spec(format!("{name}: action scale must be finite and positive, got {scale}")))
+        Err(NetsError::Spec(format!(
+            "{name}: action scale must be finite and positive, got {scale}"
+        )))
     }
 }

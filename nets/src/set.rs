@@ -127,10 +127,15 @@ impl NetsSpec {
         ];
         for (name, hidden) in widths {
             if hidden.is_empty() || hidden.contains(&0) {
-                problems.push(format!("{name} needs at least one layer, all positive, got {hidden:?}"));
+                problems.push(format!(
+                    "{name} needs at least one layer, all positive, got {hidden:?}"
+                ));
             }
         }
-        for (name, scale) in [("high_action_scale", self.high_action_scale), ("low_action_scale", self.low_action_scale)] {
+        for (name, scale) in [
+            ("high_action_scale", self.high_action_scale),
+            ("low_action_scale", self.low_action_scale),
+        ] {
             if !(scale.is_finite() && scale > 0.0) {
                 problems.push(format!("{name} must be finite and positive, got {scale}"));
             }
@@ -175,16 +180,27 @@ impl NetsSpec {
     /// [`prefix::HIGH_CRITIC`], on the learner's critic or target-critic `VarMap`).
     pub fn high_critic(&self, vb: &VarBuilder) -> Result<TwinCritic> {
         self.validate()?;
-        TwinCritic::new(vb, self.high_critic_in(), &self.high_hidden, LinearInit::XavierUniform)
+        TwinCritic::new(
+            vb,
+            self.high_critic_in(),
+            &self.high_hidden,
+            LinearInit::XavierUniform,
+        )
     }
 
     /// Builds the low-level critic of the configured variant under `vb`.
     pub fn low_critic(&self, vb: &VarBuilder) -> Result<LowCritic> {
         self.validate()?;
-        let (input, hidden, init) = (self.low_critic_in(), &self.low_critic_hidden, self.low_init());
+        let (input, hidden, init) = (
+            self.low_critic_in(),
+            &self.low_critic_hidden,
+            self.low_init(),
+        );
         Ok(match self.low_variant {
             LowVariant::Sac => LowCritic::Twin(TwinCritic::new(vb, input, hidden, init)?),
-            LowVariant::Deterministic => LowCritic::Distance(DistanceCritic::new(vb, input, hidden, init)?),
+            LowVariant::Deterministic => {
+                LowCritic::Distance(DistanceCritic::new(vb, input, hidden, init)?)
+            }
         })
     }
 }
@@ -241,7 +257,12 @@ impl PolicySet {
     /// Builds (or fetches) all three networks under `vb` (normally the root of a `VarMap`).
     pub fn new(spec: &NetsSpec, vb: &VarBuilder) -> Result<Self> {
         spec.validate()?;
-        let encoder = Encoder::new(&vb.pp(prefix::ENCODER), spec.obs_dim, &spec.encoder_hidden, spec.latent_dim)?;
+        let encoder = Encoder::new(
+            &vb.pp(prefix::ENCODER),
+            spec.obs_dim,
+            &spec.encoder_hidden,
+            spec.latent_dim,
+        )?;
         let high = GaussianPolicy::new(
             &vb.pp(prefix::HIGH_POLICY),
             spec.high_policy_in(),
@@ -259,11 +280,21 @@ fn build_low_policy(spec: &NetsSpec, vb: &VarBuilder) -> Result<LowPolicy> {
     let (input, hidden, init) = (spec.low_policy_in(), &spec.low_hidden, spec.low_init());
     let scale = spec.low_action_scale;
     Ok(match spec.low_variant {
-        LowVariant::Sac => {
-            LowPolicy::Gaussian(GaussianPolicy::new(vb, input, hidden, spec.action_dim, scale, init)?)
-        }
-        LowVariant::Deterministic => {
-            LowPolicy::Deterministic(DeterministicActor::new(vb, input, hidden, spec.action_dim, scale, init)?)
-        }
+        LowVariant::Sac => LowPolicy::Gaussian(GaussianPolicy::new(
+            vb,
+            input,
+            hidden,
+            spec.action_dim,
+            scale,
+            init,
+        )?),
+        LowVariant::Deterministic => LowPolicy::Deterministic(DeterministicActor::new(
+            vb,
+            input,
+            hidden,
+            spec.action_dim,
+            scale,
+            init,
+        )?),
     })
 }

@@ -29,7 +29,9 @@ const FNV_PRIME: u64 = 0x0000_0100_0000_01b3;
 
 /// FNV-1a 64 of `bytes`.
 pub fn fnv1a_64(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(FNV_OFFSET, |h, &b| (h ^ u64::from(b)).wrapping_mul(FNV_PRIME))
+    bytes.iter().fold(FNV_OFFSET, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(FNV_PRIME)
+    })
 }
 
 /// The layout line of one tensor: `name:d0xd1x…`.
@@ -43,7 +45,10 @@ pub fn layout_hash_of<'a, I>(entries: I) -> u64
 where
     I: IntoIterator<Item = (&'a str, &'a [usize])>,
 {
-    let mut lines: Vec<String> = entries.into_iter().map(|(n, d)| layout_line(n, d)).collect();
+    let mut lines: Vec<String> = entries
+        .into_iter()
+        .map(|(n, d)| layout_line(n, d))
+        .collect();
     lines.sort_unstable();
     fnv1a_64(lines.join("\n").as_bytes())
 }
@@ -121,14 +126,18 @@ fn check_no_extra(payload: &SafeTensors, data: &HashMap<String, Var>) -> Result<
         None => Ok(()),
         Some(name) => Err(NetsError::UnexpectedTensor {
             name: name.to_string(),
-            shape: payload.tensor(name).map(|v| v.shape().to_vec()).unwrap_or_default(),
+            shape: payload
+                .tensor(name)
+                .map(|v| v.shape().to_vec())
+                .unwrap_or_default(),
         }),
     }
 }
 
 /// Whether `name` lies under `prefix` (equal to it, or starting with `prefix.`).
 pub fn is_under(name: &str, prefix: &str) -> bool {
-    name.strip_prefix(prefix).is_some_and(|rest| rest.is_empty() || rest.starts_with('.'))
+    name.strip_prefix(prefix)
+        .is_some_and(|rest| rest.is_empty() || rest.starts_with('.'))
 }
 
 /// A `VarMap` holding the parameters of `varmap` under any of `prefixes`, sharing their
@@ -138,13 +147,21 @@ pub fn is_under(name: &str, prefix: &str) -> bool {
 /// an empty set.
 pub fn subset(varmap: &VarMap, prefixes: &[&str]) -> Result<VarMap> {
     let data = lock(varmap);
-    if let Some(p) = prefixes.iter().find(|p| !data.keys().any(|n| is_under(n, p))) {
-        return Err(NetsError::Spec(format!("subset: no parameter under prefix `{p}`")));
+    if let Some(p) = prefixes
+        .iter()
+        .find(|p| !data.keys().any(|n| is_under(n, p)))
+    {
+        return Err(NetsError::Spec(format!(
+            "subset: no parameter under prefix `{p}`"
+        )));
     }
     let out = VarMap::new();
     {
         let mut out_data = lock(&out);
-        for (name, var) in data.iter().filter(|(n, _)| prefixes.iter().any(|p| is_under(n, p))) {
+        for (name, var) in data
+            .iter()
+            .filter(|(n, _)| prefixes.iter().any(|p| is_under(n, p)))
+        {
             out_data.insert(name.clone(), var.clone());
         }
     }
@@ -154,7 +171,8 @@ pub fn subset(varmap: &VarMap, prefixes: &[&str]) -> Result<VarMap> {
 /// The parameters under `prefix`, sorted by name (e.g. to give one network its optimiser).
 pub fn vars_under(varmap: &VarMap, prefix: &str) -> Vec<Var> {
     let data = lock(varmap);
-    let mut named: Vec<(&String, &Var)> = data.iter().filter(|(n, _)| is_under(n, prefix)).collect();
+    let mut named: Vec<(&String, &Var)> =
+        data.iter().filter(|(n, _)| is_under(n, prefix)).collect();
     named.sort_unstable_by(|a, b| a.0.cmp(b.0));
     named.into_iter().map(|(_, v)| v.clone()).collect()
 }
@@ -162,5 +180,8 @@ pub fn vars_under(varmap: &VarMap, prefix: &str) -> Vec<Var> {
 /// Locks the map. A poisoned lock is recovered: the map of `Var` handles is never left
 /// half-updated by a panic (each insert is a single operation), so its contents stay valid.
 fn lock(varmap: &VarMap) -> MutexGuard<'_, HashMap<String, Var>> {
-    varmap.data().lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    varmap
+        .data()
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }

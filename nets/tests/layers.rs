@@ -5,7 +5,7 @@ mod common;
 use candle_core::{DType, Tensor};
 use candle_nn::{Module, VarBuilder, VarMap};
 use common::*;
-use nets::{EnsembleMlp, Encoder, Linear, LinearInit, Mlp, NetsError};
+use nets::{Encoder, EnsembleMlp, Linear, LinearInit, Mlp, NetsError};
 
 #[test]
 fn linear_matches_candle_nn_linear_in_value_and_gradient() {
@@ -17,11 +17,30 @@ fn linear_matches_candle_nn_linear_in_value_and_gradient() {
     let y_ref = reference.forward(&x).unwrap();
     assert!(max_abs_diff(&y, &y_ref) < 1e-6);
     let upstream = batch(4, 3);
-    let grads = y.mul(&upstream).unwrap().sum_all().unwrap().backward().unwrap();
-    let grads_ref = y_ref.mul(&upstream).unwrap().sum_all().unwrap().backward().unwrap();
+    let grads = y
+        .mul(&upstream)
+        .unwrap()
+        .sum_all()
+        .unwrap()
+        .backward()
+        .unwrap();
+    let grads_ref = y_ref
+        .mul(&upstream)
+        .unwrap()
+        .sum_all()
+        .unwrap()
+        .backward()
+        .unwrap();
     for var in vm.all_vars() {
-        let (g, g_ref) = (grads.get(var.as_tensor()).unwrap(), grads_ref.get(var.as_tensor()).unwrap());
-        assert!(max_abs_diff(g, g_ref) < 1e-5, "gradient of a {:?} parameter", var.dims());
+        let (g, g_ref) = (
+            grads.get(var.as_tensor()).unwrap(),
+            grads_ref.get(var.as_tensor()).unwrap(),
+        );
+        assert!(
+            max_abs_diff(g, g_ref) < 1e-5,
+            "gradient of a {:?} parameter",
+            var.dims()
+        );
     }
 }
 
@@ -39,12 +58,28 @@ fn linear_rejects_wrong_rank_and_wrong_width_with_dims_in_the_message() {
     let (_vm, vb) = seeded(0);
     let layer = Linear::new(&vb.pp("enc").pp("l0"), 29, 100, LinearInit::TorchDefault).unwrap();
     let err = layer.forward(&batch(2, 31)).unwrap_err();
-    assert!(matches!(err, NetsError::Dim { expected: 29, got: 31, .. }), "{err:?}");
+    assert!(
+        matches!(
+            err,
+            NetsError::Dim {
+                expected: 29,
+                got: 31,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
     let msg = err.to_string();
-    assert!(msg.contains("enc.l0") && msg.contains("29") && msg.contains("31"), "{msg}");
+    assert!(
+        msg.contains("enc.l0") && msg.contains("29") && msg.contains("31"),
+        "{msg}"
+    );
     let rank3 = Tensor::zeros((2, 3, 29), DType::F32, &cpu()).unwrap();
     let msg = layer.forward(&rank3).unwrap_err().to_string();
-    assert!(msg.contains("rank-2") && msg.contains("[2, 3, 29]") && msg.contains("[batch, 29]"), "{msg}");
+    assert!(
+        msg.contains("rank-2") && msg.contains("[2, 3, 29]") && msg.contains("[batch, 29]"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -54,7 +89,17 @@ fn mlp_layers_are_named_l0_l1_and_shapes_follow_the_widths() {
     assert_eq!(mlp.forward(&batch(10, 5)).unwrap().dims(), &[10, 3]);
     let mut names: Vec<String> = vm.data().lock().unwrap().keys().cloned().collect();
     names.sort();
-    assert_eq!(names, ["l0.bias", "l0.weight", "l1.bias", "l1.weight", "l2.bias", "l2.weight"]);
+    assert_eq!(
+        names,
+        [
+            "l0.bias",
+            "l0.weight",
+            "l1.bias",
+            "l1.weight",
+            "l2.bias",
+            "l2.weight"
+        ]
+    );
 }
 
 #[test]
@@ -76,7 +121,9 @@ fn mlp_output_layer_is_linear_and_a_trunk_ends_on_relu() {
 #[test]
 fn zero_widths_and_empty_trunks_are_spec_errors() {
     let (_vm, vb) = seeded(0);
-    let err = Mlp::new(&vb.pp("bad"), 4, &[8, 0], 2, LinearInit::TorchDefault).unwrap_err().to_string();
+    let err = Mlp::new(&vb.pp("bad"), 4, &[8, 0], 2, LinearInit::TorchDefault)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("bad") && err.contains("[4, 8, 0, 2]"), "{err}");
     assert!(Mlp::trunk(&vb.pp("t"), 4, &[], LinearInit::TorchDefault).is_err());
 }
@@ -92,21 +139,31 @@ fn ensemble_mlp_accepts_shared_or_per_member_inputs() {
     assert!(max_abs_diff(&shared, &ens.forward(&stacked).unwrap()) < 1e-5);
     let wrong_members = Tensor::stack(&[&x, &x], 0).unwrap();
     let err = ens.forward(&wrong_members).unwrap_err().to_string();
-    assert!(err.contains("ensemble size") && err.contains('3') && err.contains('2'), "{err}");
+    assert!(
+        err.contains("ensemble size") && err.contains('3') && err.contains('2'),
+        "{err}"
+    );
 }
 
 #[test]
 fn encoder_maps_observations_to_the_latent_space_without_squashing() {
     let (_vm, vb) = seeded(4);
     let encoder = Encoder::new(&vb.pp("encoder"), 29, &[100, 100], 2).unwrap();
-    let z = encoder.forward(&batch(16, 29).affine(100.0, 0.0).unwrap()).unwrap();
+    let z = encoder
+        .forward(&batch(16, 29).affine(100.0, 0.0).unwrap())
+        .unwrap();
     assert_eq!(z.dims(), &[16, 2]);
-    assert!(flat(&z).iter().any(|v| v.abs() > 1.0), "large inputs should give unsquashed outputs");
+    assert!(
+        flat(&z).iter().any(|v| v.abs() > 1.0),
+        "large inputs should give unsquashed outputs"
+    );
 }
 
 /// Max |value| of a parameter in the map.
 fn max_abs(vm: &VarMap, name: &str) -> f32 {
-    flat(vm.data().lock().unwrap()[name].as_tensor()).iter().fold(0.0, |m, v| m.max(v.abs()))
+    flat(vm.data().lock().unwrap()[name].as_tensor())
+        .iter()
+        .fold(0.0, |m, v| m.max(v.abs()))
 }
 
 #[test]
@@ -115,7 +172,10 @@ fn xavier_init_draws_within_its_bound_and_zeroes_the_bias() {
     Linear::new(&vb, 256, 128, LinearInit::XavierUniform).unwrap();
     let bound = (6.0f32 / 384.0).sqrt();
     let max_w = max_abs(&vm, "weight");
-    assert!(max_w <= bound && max_w > 0.95 * bound, "max |w| {max_w}, bound {bound}");
+    assert!(
+        max_w <= bound && max_w > 0.95 * bound,
+        "max |w| {max_w}, bound {bound}"
+    );
     assert_eq!(max_abs(&vm, "bias"), 0.0);
 }
 
@@ -150,5 +210,76 @@ fn building_twice_on_one_map_shares_the_parameters() {
     let b = Mlp::new(&vb, 3, &[4], 1, LinearInit::TorchDefault).unwrap();
     let x = batch(2, 3);
     assert_eq!(flat(&a.forward(&x).unwrap()), flat(&b.forward(&x).unwrap()));
-    assert!(Mlp::new(&vb, 5, &[4], 1, LinearInit::TorchDefault).is_err(), "shape clash must fail");
+    assert!(
+        Mlp::new(&vb, 5, &[4], 1, LinearInit::TorchDefault).is_err(),
+        "shape clash must fail"
+    );
+}
+
+#[test]
+fn ensemble_mlp_equals_separate_mlps_in_value_and_gradient() {
+    let (ens_vm, ens_vb) = seeded(7);
+    let ens = EnsembleMlp::new(&ens_vb, 2, 6, &[8, 8], 1, LinearInit::XavierUniform).unwrap();
+    let (mut sep_vm, sep_vb) = seeded(8);
+    let nets: Vec<Mlp> = (0..2)
+        .map(|j| {
+            Mlp::new(
+                &sep_vb.pp(format!("m{j}")),
+                6,
+                &[8, 8],
+                1,
+                LinearInit::XavierUniform,
+            )
+            .unwrap()
+        })
+        .collect();
+    let stacked = ens_vm.data().lock().unwrap().clone();
+    for i in 0..3 {
+        for param in ["weight", "bias"] {
+            let both = stacked[&format!("l{i}.{param}")].as_tensor().clone();
+            for j in 0..2 {
+                set(
+                    &mut sep_vm,
+                    &format!("m{j}.l{i}.{param}"),
+                    both.get(j).unwrap(),
+                );
+            }
+        }
+    }
+    let x = batch(5, 6);
+    let target = batch(5, 1);
+    let y = ens.forward(&x).unwrap();
+    let ens_grads = y
+        .broadcast_sub(&target)
+        .unwrap()
+        .sqr()
+        .unwrap()
+        .sum_all()
+        .unwrap()
+        .backward()
+        .unwrap();
+    let mut sep_loss = Tensor::zeros((), DType::F32, &cpu()).unwrap();
+    for (j, net) in nets.iter().enumerate() {
+        let yj = net.forward(&x).unwrap();
+        assert!(
+            max_abs_diff(&y.get(j).unwrap(), &yj) < 1e-5,
+            "member {j} output"
+        );
+        sep_loss = sep_loss
+            .add(&yj.sub(&target).unwrap().sqr().unwrap().sum_all().unwrap())
+            .unwrap();
+    }
+    let sep_grads = sep_loss.backward().unwrap();
+    for i in 0..3 {
+        let g_ens = ens_grads
+            .get(stacked[&format!("l{i}.weight")].as_tensor())
+            .unwrap();
+        for (j, net) in nets.iter().enumerate() {
+            let g = sep_grads.get(net.layers()[i].weight()).unwrap();
+            assert!(
+                max_abs_diff(&g_ens.get(j).unwrap(), g) < 1e-4,
+                "layer {i}, member {j}"
+            );
+        }
+    }
 }

@@ -11,11 +11,28 @@ use nets::{DeterministicActor, GaussianPolicy, LinearInit};
 fn fixed_policy() -> GaussianPolicy {
     let (mut vm, vb) = seeded(0);
     let policy = GaussianPolicy::new(&vb, 3, &[4], 2, 10.0, LinearInit::XavierUniform).unwrap();
-    set(&mut vm, "trunk.l0.weight", t2(&[&[0.5, -0.3, 0.2], &[0.1, 0.4, -0.6], &[-0.7, 0.2, 0.3], &[0.3, 0.3, 0.3]]));
+    set(
+        &mut vm,
+        "trunk.l0.weight",
+        t2(&[
+            &[0.5, -0.3, 0.2],
+            &[0.1, 0.4, -0.6],
+            &[-0.7, 0.2, 0.3],
+            &[0.3, 0.3, 0.3],
+        ]),
+    );
     set(&mut vm, "trunk.l0.bias", t1(&[0.1, -0.2, 0.05, 0.0]));
-    set(&mut vm, "mean.weight", t2(&[&[0.6, -0.4, 0.3, 0.2], &[-0.5, 0.7, 0.1, -0.3]]));
+    set(
+        &mut vm,
+        "mean.weight",
+        t2(&[&[0.6, -0.4, 0.3, 0.2], &[-0.5, 0.7, 0.1, -0.3]]),
+    );
     set(&mut vm, "mean.bias", t1(&[0.05, -0.1]));
-    set(&mut vm, "log_std.weight", t2(&[&[0.2, 0.1, -0.3, 0.4], &[-0.1, 0.3, 0.2, 0.1]]));
+    set(
+        &mut vm,
+        "log_std.weight",
+        t2(&[&[0.2, 0.1, -0.3, 0.4], &[-0.1, 0.3, 0.2, 0.1]]),
+    );
     set(&mut vm, "log_std.bias", t1(&[-0.5, 3.0]));
     policy
 }
@@ -51,7 +68,11 @@ fn tanh_gaussian_sample_matches_the_reference_numbers() {
     let (action, log_prob) = policy.sample(&x, &eps).unwrap();
     assert_eq!(action.dims(), &[2, 2]);
     assert_eq!(log_prob.dims(), &[2, 1]);
-    assert_close(&flat(&action), &[6.688394636, -9.6709286223, 0.793545085, 4.2144910642], 1e-5);
+    assert_close(
+        &flat(&action),
+        &[6.688394636, -9.6709286223, 0.793545085, 4.2144910642],
+        1e-5,
+    );
     assert_close(&flat(&log_prob), &[-4.9275164713, -7.9874285136], 1e-5);
 }
 
@@ -60,7 +81,11 @@ fn deterministic_action_is_scaled_tanh_of_the_mean() {
     let policy = fixed_policy();
     let (x, _) = fixed_inputs();
     let action = policy.deterministic(&x).unwrap();
-    assert_close(&flat(&action), &[5.190218339, -5.1352090124, 4.9676344321, 0.7982976911], 1e-5);
+    assert_close(
+        &flat(&action),
+        &[5.190218339, -5.1352090124, 4.9676344321, 0.7982976911],
+        1e-5,
+    );
 }
 
 #[test]
@@ -70,19 +95,41 @@ fn sample_gradients_reach_every_policy_parameter() {
     let x = batch(4, 5);
     let eps = batch(4, 2);
     let (action, log_prob) = policy.sample(&x, &eps).unwrap();
-    let loss = action.sum_all().unwrap().add(&log_prob.sum_all().unwrap()).unwrap();
+    let loss = action
+        .sum_all()
+        .unwrap()
+        .add(&log_prob.sum_all().unwrap())
+        .unwrap();
     let grads = loss.backward().unwrap();
     for var in vm.all_vars() {
-        assert!(grads.get(var.as_tensor()).is_some(), "no gradient for a parameter of shape {:?}", var.dims());
+        assert!(
+            grads.get(var.as_tensor()).is_some(),
+            "no gradient for a parameter of shape {:?}",
+            var.dims()
+        );
     }
 }
 
 #[test]
 fn noise_with_the_wrong_shape_is_an_error_naming_the_policy() {
     let (_vm, vb) = seeded(0);
-    let policy = GaussianPolicy::new(&vb.pp("high_policy"), 3, &[4], 2, 10.0, LinearInit::XavierUniform).unwrap();
-    let err = policy.sample(&batch(2, 3), &batch(2, 3)).unwrap_err().to_string();
-    assert!(err.contains("high_policy") && err.contains("[2, 3]"), "{err}");
+    let policy = GaussianPolicy::new(
+        &vb.pp("high_policy"),
+        3,
+        &[4],
+        2,
+        10.0,
+        LinearInit::XavierUniform,
+    )
+    .unwrap();
+    let err = policy
+        .sample(&batch(2, 3), &batch(2, 3))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("high_policy") && err.contains("[2, 3]"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -106,5 +153,9 @@ fn deterministic_actor_is_scaled_tanh_of_its_mlp() {
     set(&mut vm, "l1.bias", t1(&[0.5]));
     // relu([0.2, -0.3]) = [0.2, 0]; 0.2 + 0.5 = 0.7; relu([-1, 1]) = [0, 1]; -1 + 0.5 = -0.5
     let a = actor.forward(&t2(&[&[0.2, -0.3], &[-1.0, 1.0]])).unwrap();
-    assert_close(&flat(&a), &[16.0 * 0.7f64.tanh(), 16.0 * (-0.5f64).tanh()], 1e-6);
+    assert_close(
+        &flat(&a),
+        &[16.0 * 0.7f64.tanh(), 16.0 * (-0.5f64).tanh()],
+        1e-6,
+    );
 }

@@ -5,7 +5,10 @@ mod common;
 use candle_nn::VarMap;
 use common::*;
 use nets::weights::{fnv1a_64, layout_hash_of, layout_line, vars_under};
-use nets::{layout_hash, load_safetensors_bytes, prefix, subset, to_safetensors_bytes, NetsError, NetsSpec, PolicySet};
+use nets::{
+    layout_hash, load_safetensors_bytes, prefix, subset, to_safetensors_bytes, NetsError, NetsSpec,
+    PolicySet,
+};
 
 fn policy_set(spec: &NetsSpec, seed: u64) -> VarMap {
     let (vm, vb) = seeded(seed);
@@ -20,7 +23,12 @@ fn bits(vm: &VarMap) -> Vec<(String, Vec<u32>)> {
         .lock()
         .unwrap()
         .iter()
-        .map(|(n, v)| (n.clone(), flat(v.as_tensor()).iter().map(|x| x.to_bits()).collect()))
+        .map(|(n, v)| {
+            (
+                n.clone(),
+                flat(v.as_tensor()).iter().map(|x| x.to_bits()).collect(),
+            )
+        })
         .collect();
     out.sort();
     out
@@ -36,19 +44,37 @@ fn safetensors_round_trip_preserves_every_tensor_bit_exactly() {
     load_safetensors_bytes(&receiver, &bytes).unwrap();
     assert_eq!(bits(&source), bits(&receiver));
     assert_eq!(layout_hash(&source), layout_hash(&receiver));
-    assert_eq!(to_safetensors_bytes(&receiver).unwrap(), bytes, "serialisation is deterministic");
+    assert_eq!(
+        to_safetensors_bytes(&receiver).unwrap(),
+        bytes,
+        "serialisation is deterministic"
+    );
 }
 
 #[test]
 fn loading_a_wrong_shape_fails_naming_the_tensor_and_changes_nothing() {
     let receiver = policy_set(&NetsSpec::default(), 2);
     let before = bits(&receiver);
-    let other = policy_set(&NetsSpec { obs_dim: 30, ..NetsSpec::default() }, 1);
-    let err = load_safetensors_bytes(&receiver, &to_safetensors_bytes(&other).unwrap()).unwrap_err();
+    let other = policy_set(
+        &NetsSpec {
+            obs_dim: 30,
+            ..NetsSpec::default()
+        },
+        1,
+    );
+    let err =
+        load_safetensors_bytes(&receiver, &to_safetensors_bytes(&other).unwrap()).unwrap_err();
     let msg = err.to_string();
     assert!(matches!(err, NetsError::ShapeMismatch { .. }), "{err:?}");
-    assert!(msg.contains("encoder.l0.weight") && msg.contains("[100, 29]") && msg.contains("[100, 30]"), "{msg}");
-    assert_eq!(bits(&receiver), before, "a rejected payload must not change any value");
+    assert!(
+        msg.contains("encoder.l0.weight") && msg.contains("[100, 29]") && msg.contains("[100, 30]"),
+        "{msg}"
+    );
+    assert_eq!(
+        bits(&receiver),
+        before,
+        "a rejected payload must not change any value"
+    );
 }
 
 #[test]
@@ -56,7 +82,8 @@ fn loading_with_a_missing_name_fails_naming_it() {
     let receiver = policy_set(&NetsSpec::default(), 2);
     let source = policy_set(&NetsSpec::default(), 1);
     let partial = subset(&source, &[prefix::ENCODER, prefix::HIGH_POLICY]).unwrap();
-    let err = load_safetensors_bytes(&receiver, &to_safetensors_bytes(&partial).unwrap()).unwrap_err();
+    let err =
+        load_safetensors_bytes(&receiver, &to_safetensors_bytes(&partial).unwrap()).unwrap_err();
     assert!(matches!(err, NetsError::MissingTensor { .. }), "{err:?}");
     assert!(err.to_string().contains("low_policy.log_std.bias"), "{err}");
 }
@@ -65,9 +92,13 @@ fn loading_with_a_missing_name_fails_naming_it() {
 fn loading_a_payload_with_an_extra_tensor_fails_naming_it() {
     let source = policy_set(&NetsSpec::default(), 1);
     let receiver = subset(&policy_set(&NetsSpec::default(), 2), &[prefix::ENCODER]).unwrap();
-    let err = load_safetensors_bytes(&receiver, &to_safetensors_bytes(&source).unwrap()).unwrap_err();
+    let err =
+        load_safetensors_bytes(&receiver, &to_safetensors_bytes(&source).unwrap()).unwrap_err();
     assert!(matches!(err, NetsError::UnexpectedTensor { .. }), "{err:?}");
-    assert!(err.to_string().contains("high_policy.log_std.bias"), "{err}");
+    assert!(
+        err.to_string().contains("high_policy.log_std.bias"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -81,7 +112,10 @@ fn garbage_bytes_are_a_safetensors_error() {
 fn layout_hash_changes_when_a_shape_changes_but_not_with_values() {
     let base = layout_hash(&policy_set(&NetsSpec::default(), 1));
     assert_eq!(base, layout_hash(&policy_set(&NetsSpec::default(), 2)));
-    let wider = NetsSpec { high_hidden: vec![256, 257], ..NetsSpec::default() };
+    let wider = NetsSpec {
+        high_hidden: vec![256, 257],
+        ..NetsSpec::default()
+    };
     assert_ne!(base, layout_hash(&policy_set(&wider, 1)));
     let deterministic = NetsSpec::default().with_deterministic_low();
     assert_ne!(base, layout_hash(&policy_set(&deterministic, 1)));
@@ -94,7 +128,11 @@ fn layout_hash_follows_the_documented_contract() {
     assert_eq!(fnv1a_64(b"a"), 0xaf63_dc4c_8601_ec8c);
     assert_eq!(layout_line("net.l0.weight", &[3, 2]), "net.l0.weight:3x2");
     // "net.l0.bias:3\nnet.l0.weight:3x2\nscalar:" → 0xaa7b01b6bdb2e06e (same Python)
-    let entries: [(&str, &[usize]); 3] = [("scalar", &[]), ("net.l0.weight", &[3, 2]), ("net.l0.bias", &[3])];
+    let entries: [(&str, &[usize]); 3] = [
+        ("scalar", &[]),
+        ("net.l0.weight", &[3, 2]),
+        ("net.l0.bias", &[3]),
+    ];
     assert_eq!(layout_hash_of(entries), 0xaa7b_01b6_bdb2_e06e);
 }
 
@@ -123,7 +161,9 @@ fn actor_side_subset_holds_exactly_the_policy_set_and_shares_storage() {
 #[test]
 fn subset_with_an_unknown_prefix_is_an_error() {
     let vm = policy_set(&NetsSpec::default(), 1);
-    let Err(err) = subset(&vm, &["encoder", "hihg_policy"]) else { panic!("typo must fail") };
+    let Err(err) = subset(&vm, &["encoder", "hihg_policy"]) else {
+        panic!("typo must fail")
+    };
     let err = err.to_string();
     assert!(err.contains("hihg_policy"), "{err}");
     // `encoder` must not match a hypothetical `encoder2.*`: prefixes end at a dot.

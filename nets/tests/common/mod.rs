@@ -40,13 +40,20 @@ pub fn assert_close(got: &[f32], want: &[f64], tol: f64) {
     assert_eq!(got.len(), want.len(), "length: got {got:?}, want {want:?}");
     for (i, (g, w)) in got.iter().zip(want).enumerate() {
         let err = (f64::from(*g) - w).abs();
-        assert!(err <= tol * (1.0 + w.abs()), "element {i}: got {g}, want {w} (|err| {err})");
+        assert!(
+            err <= tol * (1.0 + w.abs()),
+            "element {i}: got {g}, want {w} (|err| {err})"
+        );
     }
 }
 
 pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
     assert_eq!(a.dims(), b.dims());
-    flat(a).iter().zip(flat(b)).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    flat(a)
+        .iter()
+        .zip(flat(b))
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 /// A random batch `[batch, dim]` in [-1, 1).
