@@ -6,7 +6,7 @@
 //! - [`linear`]: dense layers (`weight [out, in]`, `bias [out]`) and their stacked ensemble form.
 //! - [`mlp`]: ReLU MLPs (`l0`, `l1`, …) and ensembles of them.
 //! - [`encoder`], [`policy`], [`critic`]: φ, the tanh-Gaussian and deterministic policies, the
-//!   batched twin critic and the γ-distance critic.
+//!   twin critic and the γ-distance critic.
 //! - [`set`]: [`NetsSpec`] and the actor-side [`PolicySet`].
 //! - [`weights`]: safetensors bytes, strict loading, layout hash, subsets.
 //! - [`init`]: Xavier / PyTorch-default init and a seeded `VarBuilder`.

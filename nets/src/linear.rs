@@ -6,10 +6,12 @@
 //! Why not `candle_nn::Linear`: it adds the bias with `broadcast_add`, whose backward pass
 //! reduces the output gradient with a strided `sum_keepdim(0)`. Here the bias enters as a
 //! rank-1 matrix product `1 · bᵀ` (a `[batch, 1] × [1, out]` matmul), so its gradient
-//! `1ᵀ · ∂L/∂y` is computed by gemm as well. Measured by `examples/bench_forward.rs`: the
-//! forward + backward of a 2 × 256 MLP is faster this way than with `candle_nn::Linear`
-//! (figures in the bench's doc). Folding the bias into an augmented weight `[W | b]` was
-//! measured too and was slower: it copies both the input and the weight every call.
+//! `1ᵀ · ∂L/∂y` is computed by gemm as well. On this 2-core dev machine `sum_keepdim(0)` of a
+//! `[128, 256]` gradient took ~650 µs against ~5 µs for the `1ᵀ · G` gemm, and
+//! `examples/bench_forward.rs` (forward + backward, 33 → 2 × 256 → 8, batch 128, one thread)
+//! measured `candle_nn::Linear` 1.04–1.41× slower than this layer over five loaded runs.
+//! Folding the bias into an augmented weight `[W | b]` was measured too and was slower than
+//! this form: it copies both the input and the weight every call.
 //!
 //! Invariants: inputs are checked for rank and feature size before any arithmetic, and errors
 //! name the layer by its parameter prefix.
