@@ -124,14 +124,21 @@ impl Episodes {
             return Err(if index <= last {
                 duplicate(header, last.saturating_add(1))
             } else {
-                LearnerError::AfterEpisodeEnd { actor: key.0, episode: key.1, chunk_index: index, last }
+                LearnerError::AfterEpisodeEnd {
+                    actor: key.0,
+                    episode: key.1,
+                    chunk_index: index,
+                    last,
+                }
             });
         }
         let next = self.open.get(&key).map_or(0, |e| e.next_chunk);
         match index.cmp(&next) {
             std::cmp::Ordering::Less => Err(duplicate(header, next)),
             std::cmp::Ordering::Equal => Ok(Continuity::InOrder),
-            std::cmp::Ordering::Greater => Ok(Continuity::Gap { lost: u64::from(index - next) }),
+            std::cmp::Ordering::Greater => Ok(Continuity::Gap {
+                lost: u64::from(index - next),
+            }),
         }
     }
 
@@ -194,10 +201,16 @@ impl Episodes {
         if self.open.len() <= MAX_OPEN_EPISODES {
             return 0;
         }
-        let oldest = self.open.iter().min_by_key(|(_, e)| e.touched).map(|(k, _)| *k);
+        let oldest = self
+            .open
+            .iter()
+            .min_by_key(|(_, e)| e.touched)
+            .map(|(k, _)| *k);
         let Some(key) = oldest else { return 0 };
         self.abandoned += 1;
-        self.open.remove(&key).map_or(0, |e| u64::from(e.segment.is_some()))
+        self.open
+            .remove(&key)
+            .map_or(0, |e| u64::from(e.segment.is_some()))
     }
 }
 
@@ -226,7 +239,11 @@ fn low_transition<'a>(step: &StepView<'a>) -> LowTransition<'a> {
 }
 
 /// Feeds one step to the segment state; returns the number of segments it closed (0–2).
-fn advance_segment(segment: &mut Option<OpenSegment>, step: &StepView, high: &mut HighReplay) -> u64 {
+fn advance_segment(
+    segment: &mut Option<OpenSegment>,
+    step: &StepView,
+    high: &mut HighReplay,
+) -> u64 {
     let mut closed = 0;
     if step.decision.is_decision() {
         if let Some(done) = segment.take() {
@@ -250,7 +267,11 @@ fn advance_segment(segment: &mut Option<OpenSegment>, step: &StepView, high: &mu
 
 /// Closes a segment left open at the episode's end (no terminated/truncated flag: physics
 /// failure) as truncated at the last stored state.
-fn close_at_end(segment: &mut Option<OpenSegment>, steps: &[StepView], high: &mut HighReplay) -> u64 {
+fn close_at_end(
+    segment: &mut Option<OpenSegment>,
+    steps: &[StepView],
+    high: &mut HighReplay,
+) -> u64 {
     match (segment.take(), steps.last()) {
         (Some(done), Some(last)) => {
             done.close(high, last.next_obs, false, true);

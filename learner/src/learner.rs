@@ -22,7 +22,9 @@ use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
 use nets::{spec_from_config, NetsSpec, TaskDims};
 use protocol::config::LowAlgo;
-use protocol::{Config, PhiVersion, PolicyVersion, StepLayout, StepView, TrajectoryHeader, WeightsHeader};
+use protocol::{
+    Config, PhiVersion, PolicyVersion, StepLayout, StepView, TrajectoryHeader, WeightsHeader,
+};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
@@ -142,14 +144,24 @@ impl Learner {
 
     /// As [`Learner::new`], with the task's `episode_length` (env steps) for the derived low
     /// ratio `updates_per_episode / episode_length`; `env.episode_length` overrides it.
-    pub fn with_episode_length(config: &Config, dims: TaskDims, episode_length: u32, seed: u64) -> Result<Learner, LearnerError> {
+    pub fn with_episode_length(
+        config: &Config,
+        dims: TaskDims,
+        episode_length: u32,
+        seed: u64,
+    ) -> Result<Learner, LearnerError> {
         config.validate()?;
         if config.learner.low.algo == LowAlgo::Deterministic {
             return Err(deterministic_unsupported());
         }
         let spec = spec_from_config(config, dims)?;
-        let layout = StepLayout::new(spec.obs_dim, spec.action_dim, spec.goal_dim, spec.latent_dim)
-            .map_err(|err| LearnerError::Nets(nets::NetsError::Spec(err.to_string())))?;
+        let layout = StepLayout::new(
+            spec.obs_dim,
+            spec.action_dim,
+            spec.goal_dim,
+            spec.latent_dim,
+        )
+        .map_err(|err| LearnerError::Nets(nets::NetsError::Spec(err.to_string())))?;
         let nets = build_networks(config, &spec, seed)?;
         let length = config.env.episode_length.unwrap_or(episode_length);
         let (low_replay, high_replay) = buffers(config, &spec);
@@ -179,8 +191,14 @@ impl Learner {
     /// Checks and stores one trajectory chunk (see the module doc of [`crate::ingest`]).
     /// Malformed or mismatched chunks are counted in `rejected_chunks`, repeats in
     /// `duplicate_chunks`; both return an error and change no buffer.
-    pub fn ingest(&mut self, header: &TrajectoryHeader, payload: &[f32]) -> Result<(), LearnerError> {
-        let steps = self.decode(header, payload).inspect_err(|_| self.stats.rejected_chunks += 1)?;
+    pub fn ingest(
+        &mut self,
+        header: &TrajectoryHeader,
+        payload: &[f32],
+    ) -> Result<(), LearnerError> {
+        let steps = self
+            .decode(header, payload)
+            .inspect_err(|_| self.stats.rejected_chunks += 1)?;
         let continuity = self.episodes.check(header).inspect_err(|err| match err {
             LearnerError::DuplicateChunk { .. } => self.stats.duplicate_chunks += 1,
             _ => self.stats.rejected_chunks += 1,
@@ -188,13 +206,23 @@ impl Learner {
         if let crate::ingest::Continuity::Gap { lost } = continuity {
             self.stats.lost_chunks += lost;
         }
-        let outcome = self.episodes.store(header, continuity, &steps, &mut self.low_replay, &mut self.high_replay);
+        let outcome = self.episodes.store(
+            header,
+            continuity,
+            &steps,
+            &mut self.low_replay,
+            &mut self.high_replay,
+        );
         self.count_stored(header, steps.len() as u64, &outcome);
         Ok(())
     }
 
     /// Header and records, checked against the learner's layout; nothing is changed.
-    fn decode<'a>(&self, header: &TrajectoryHeader, payload: &'a [f32]) -> Result<Vec<StepView<'a>>, LearnerError> {
+    fn decode<'a>(
+        &self,
+        header: &TrajectoryHeader,
+        payload: &'a [f32],
+    ) -> Result<Vec<StepView<'a>>, LearnerError> {
         let rejected = |source| LearnerError::Rejected {
             actor: header.actor_id,
             episode: header.episode_id,
@@ -211,11 +239,18 @@ impl Learner {
                 found: layout,
             });
         }
-        layout.view_chunk(payload, header.n_steps as usize).map_err(rejected)
+        layout
+            .view_chunk(payload, header.n_steps as usize)
+            .map_err(rejected)
     }
 
     /// Counters after a stored chunk.
-    fn count_stored(&mut self, header: &TrajectoryHeader, n_steps: u64, outcome: &crate::ingest::ChunkOutcome) {
+    fn count_stored(
+        &mut self,
+        header: &TrajectoryHeader,
+        n_steps: u64,
+        outcome: &crate::ingest::ChunkOutcome,
+    ) {
         let s = &mut self.stats;
         s.chunks += 1;
         s.env_steps += n_steps;
@@ -224,7 +259,10 @@ impl Learner {
         s.high_transitions += outcome.high_added;
         s.dropped_segments += outcome.segments_dropped;
         s.abandoned_episodes = self.episodes.n_abandoned();
-        let lag = self.policy_version.0.saturating_sub(header.policy_version.0);
+        let lag = self
+            .policy_version
+            .0
+            .saturating_sub(header.policy_version.0);
         self.telemetry.last_policy_lag = lag;
         self.telemetry.max_policy_lag = self.telemetry.max_policy_lag.max(lag);
     }
@@ -232,13 +270,17 @@ impl Learner {
     /// Low updates the ratio allows now.
     fn low_due(&self) -> u64 {
         let stored = self.low_replay.ring().len() as u64;
-        self.ratio.low_allowed(self.stats.env_steps, stored).saturating_sub(self.updates_low)
+        self.ratio
+            .low_allowed(self.stats.env_steps, stored)
+            .saturating_sub(self.updates_low)
     }
 
     /// High updates the ratio allows now.
     fn high_due(&self) -> u64 {
         let ring = self.high_replay.ring();
-        self.ratio.high_allowed(ring.total(), ring.len() as u64).saturating_sub(self.updates_high)
+        self.ratio
+            .high_allowed(ring.total(), ring.len() as u64)
+            .saturating_sub(self.updates_high)
     }
 
     /// Runs the updates that the replay ratio allows now, at most `max_updates`, alternating
@@ -271,7 +313,9 @@ impl Learner {
     fn low_update(&mut self) -> Result<(), LearnerError> {
         let len = self.low_replay.ring().len();
         let replay = &self.low_replay;
-        sample_into(&mut self.rng, len, &mut self.low_stage, |stage, k, i| replay.fill(stage, k, i));
+        sample_into(&mut self.rng, len, &mut self.low_stage, |stage, k, i| {
+            replay.fill(stage, k, i)
+        });
         let batch = to_tensors(&self.low_stage)?;
         let (next_eps, eps) = self.noise_pair(self.low_stage.batch, self.spec.action_dim)?;
         self.telemetry.low = self.nets.low.update(&batch, &next_eps, &eps)?;
@@ -283,7 +327,9 @@ impl Learner {
     fn high_update(&mut self) -> Result<(), LearnerError> {
         let len = self.high_replay.ring().len();
         let replay = &self.high_replay;
-        sample_into(&mut self.rng, len, &mut self.high_stage, |stage, k, i| replay.fill(stage, k, i));
+        sample_into(&mut self.rng, len, &mut self.high_stage, |stage, k, i| {
+            replay.fill(stage, k, i)
+        });
         let batch = to_tensors(&self.high_stage)?;
         let (next_eps, eps) = self.noise_pair(self.high_stage.batch, self.spec.latent_dim)?;
         self.telemetry.high = self.nets.high.update(&batch, &next_eps, &eps)?;
@@ -295,7 +341,8 @@ impl Learner {
     fn noise_pair(&mut self, batch: usize, dim: usize) -> Result<(Tensor, Tensor), LearnerError> {
         let mut draw = || -> Result<Tensor, LearnerError> {
             self.noise.clear();
-            self.noise.extend((0..batch * dim).map(|_| -> f32 { StandardNormal.sample(&mut self.rng) }));
+            self.noise
+                .extend((0..batch * dim).map(|_| -> f32 { StandardNormal.sample(&mut self.rng) }));
             Ok(Tensor::from_slice(&self.noise, (batch, dim), &Device::Cpu)?)
         };
         Ok((draw()?, draw()?))
@@ -307,15 +354,29 @@ impl Learner {
         let updates = self.updates_low + self.updates_high;
         let p = self.publish;
         let changed = updates > p.updates_at_last;
-        let waited = self.stats.env_steps.saturating_sub(p.steps_at_last) >= self.publish_interval_steps;
+        let waited =
+            self.stats.env_steps.saturating_sub(p.steps_at_last) >= self.publish_interval_steps;
         if p.published_once && !(changed && waited) {
             return Ok(None);
         }
         let bytes = nets::to_safetensors_bytes(&self.nets.policy_vm)?;
-        let version = if p.published_once { PolicyVersion(self.policy_version.0 + 1) } else { self.policy_version };
-        let header = WeightsHeader::new(version, self.phi_version, self.weights_layout_hash(), bytes.len());
+        let version = if p.published_once {
+            PolicyVersion(self.policy_version.0 + 1)
+        } else {
+            self.policy_version
+        };
+        let header = WeightsHeader::new(
+            version,
+            self.phi_version,
+            self.weights_layout_hash(),
+            bytes.len(),
+        );
         self.policy_version = version;
-        self.publish = PublishState { published_once: true, steps_at_last: self.stats.env_steps, updates_at_last: updates };
+        self.publish = PublishState {
+            published_once: true,
+            steps_at_last: self.stats.env_steps,
+            updates_at_last: updates,
+        };
         Ok(Some((header, bytes)))
     }
 
@@ -394,7 +455,11 @@ impl Learner {
     fn count_metrics(&self) -> Vec<(&'static str, f64)> {
         let t = &self.telemetry;
         let s = &self.stats;
-        let per_sec = if t.train_secs > 0.0 { t.updates_timed as f64 / t.train_secs } else { 0.0 };
+        let per_sec = if t.train_secs > 0.0 {
+            t.updates_timed as f64 / t.train_secs
+        } else {
+            0.0
+        };
         let p = self.progress();
         vec![
             ("charts/updates_per_sec", per_sec),
@@ -466,7 +531,13 @@ fn buffers(config: &Config, spec: &NetsSpec) -> (LowReplay, HighReplay) {
         scale: config.hierarchy.low_reward_scale as f32,
         threshold: config.hierarchy.low_reach_threshold as f32,
     };
-    let low = LowReplay::new(capacity, spec.obs_dim, spec.latent_dim, spec.action_dim, reward);
+    let low = LowReplay::new(
+        capacity,
+        spec.obs_dim,
+        spec.latent_dim,
+        spec.action_dim,
+        reward,
+    );
     let high = HighReplay::new(high_capacity, spec.obs_dim, spec.goal_dim, spec.latent_dim);
     (low, high)
 }
@@ -489,7 +560,11 @@ fn to_tensors(stage: &BatchStage) -> Result<SacBatch, LearnerError> {
     let head_w = stage.head.len() / b.max(1);
     let tail_w = stage.tail.len() / b.max(1);
     let action_w = stage.action.len() / b.max(1);
-    let tail = if tail_w == 0 { None } else { Some(Tensor::from_slice(&stage.tail, (b, tail_w), &cpu)?) };
+    let tail = if tail_w == 0 {
+        None
+    } else {
+        Some(Tensor::from_slice(&stage.tail, (b, tail_w), &cpu)?)
+    };
     Ok(SacBatch {
         head: Tensor::from_slice(&stage.head, (b, head_w), &cpu)?,
         next_head: Tensor::from_slice(&stage.next_head, (b, head_w), &cpu)?,

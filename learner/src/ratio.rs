@@ -75,7 +75,10 @@ impl ReplayRatio {
         if added < self.high_min_transitions || stored < self.high_min_transitions {
             0
         } else {
-            floor_product(added - self.high_min_transitions + 1, self.high_per_transition)
+            floor_product(
+                added - self.high_min_transitions + 1,
+                self.high_per_transition,
+            )
         }
     }
 

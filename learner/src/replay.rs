@@ -41,7 +41,12 @@ pub struct Column {
 impl Column {
     /// An empty column; nothing is allocated until the first write.
     pub fn new(width: usize, capacity: usize) -> Self {
-        Self { width, block_rows: BLOCK_ROWS.min(capacity).max(1), capacity, blocks: Vec::new() }
+        Self {
+            width,
+            block_rows: BLOCK_ROWS.min(capacity).max(1),
+            capacity,
+            blocks: Vec::new(),
+        }
     }
 
     /// Writes row `index` (< capacity). Rows are first written in order 0, 1, 2, …, so a new
@@ -51,7 +56,8 @@ impl Column {
         let (block, row) = (index / self.block_rows, index % self.block_rows);
         if block == self.blocks.len() {
             let rows = self.block_rows.min(self.capacity - block * self.block_rows);
-            self.blocks.push(vec![0.0; rows * self.width].into_boxed_slice());
+            self.blocks
+                .push(vec![0.0; rows * self.width].into_boxed_slice());
         }
         let start = row * self.width;
         self.blocks[block][start..start + self.width].copy_from_slice(values);
@@ -87,7 +93,12 @@ pub struct Ring {
 impl Ring {
     /// An empty ring of `capacity` (≥ 1) rows.
     pub fn new(capacity: usize) -> Self {
-        Self { capacity: capacity.max(1), len: 0, next: 0, total: 0 }
+        Self {
+            capacity: capacity.max(1),
+            len: 0,
+            next: 0,
+            total: 0,
+        }
     }
 
     /// Claims the slot for the next row (overwriting the oldest when full).
@@ -165,7 +176,11 @@ fn put_row(dst: &mut [f32], i: usize, width: usize, parts: &[&[f32]]) {
 
 /// Euclidean distance between two equally long vectors.
 pub fn distance(a: &[f32], b: &[f32]) -> f32 {
-    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>().sqrt()
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f32>()
+        .sqrt()
 }
 
 /// How the low reward and "reached" are derived from stored φ values (SPEC §6.1, Eq. 2).
@@ -223,7 +238,13 @@ pub struct LowReplay {
 
 impl LowReplay {
     /// An empty buffer of `capacity` transitions.
-    pub fn new(capacity: usize, obs_dim: usize, latent_dim: usize, action_dim: usize, reward: LowRewardSpec) -> Self {
+    pub fn new(
+        capacity: usize,
+        obs_dim: usize,
+        latent_dim: usize,
+        action_dim: usize,
+        reward: LowRewardSpec,
+    ) -> Self {
         let col = |w| Column::new(w, capacity.max(1));
         Self {
             ring: Ring::new(capacity),
@@ -248,7 +269,8 @@ impl LowReplay {
         self.subgoal.write(i, t.subgoal);
         self.next_obs.write(i, t.next_obs);
         self.next_phi.write(i, t.next_phi);
-        self.terminated.write(i, &[f32::from(u8::from(t.terminated))]);
+        self.terminated
+            .write(i, &[f32::from(u8::from(t.terminated))]);
         self.truncated.write(i, &[f32::from(u8::from(t.truncated))]);
     }
 
@@ -278,7 +300,12 @@ impl LowReplay {
 
     /// Staging sized for this buffer: head `[obs, φ]`, tail `subgoal`.
     pub fn stage(&self, batch: usize) -> BatchStage {
-        BatchStage::new(batch, self.obs.width + self.phi.width, self.subgoal.width, self.action.width)
+        BatchStage::new(
+            batch,
+            self.obs.width + self.phi.width,
+            self.subgoal.width,
+            self.action.width,
+        )
     }
 
     /// Writes row `idx` into slot `k` of `stage`. `terminal` = env `terminated` or subgoal
@@ -286,10 +313,30 @@ impl LowReplay {
     /// bootstrapping.
     pub fn fill(&self, stage: &mut BatchStage, k: usize, idx: usize) {
         let head_w = self.obs.width + self.phi.width;
-        put_row(&mut stage.head, k, head_w, &[self.obs.row(idx), self.phi.row(idx)]);
-        put_row(&mut stage.next_head, k, head_w, &[self.next_obs.row(idx), self.next_phi.row(idx)]);
-        put_row(&mut stage.tail, k, self.subgoal.width, &[self.subgoal.row(idx)]);
-        put_row(&mut stage.action, k, self.action.width, &[self.action.row(idx)]);
+        put_row(
+            &mut stage.head,
+            k,
+            head_w,
+            &[self.obs.row(idx), self.phi.row(idx)],
+        );
+        put_row(
+            &mut stage.next_head,
+            k,
+            head_w,
+            &[self.next_obs.row(idx), self.next_phi.row(idx)],
+        );
+        put_row(
+            &mut stage.tail,
+            k,
+            self.subgoal.width,
+            &[self.subgoal.row(idx)],
+        );
+        put_row(
+            &mut stage.action,
+            k,
+            self.action.width,
+            &[self.action.row(idx)],
+        );
         let (reward, reached) = self.reward_of(idx);
         stage.reward[k] = reward;
         stage.terminal[k] = f32::from(u8::from(reached || self.terminated.scalar(idx) != 0.0));
@@ -297,10 +344,19 @@ impl LowReplay {
 
     /// Floats allocated by all columns.
     pub fn allocated_floats(&self) -> usize {
-        [&self.obs, &self.phi, &self.action, &self.subgoal, &self.next_obs, &self.next_phi, &self.terminated, &self.truncated]
-            .iter()
-            .map(|c| c.allocated())
-            .sum()
+        [
+            &self.obs,
+            &self.phi,
+            &self.action,
+            &self.subgoal,
+            &self.next_obs,
+            &self.next_phi,
+            &self.terminated,
+            &self.truncated,
+        ]
+        .iter()
+        .map(|c| c.allocated())
+        .sum()
     }
 }
 
@@ -365,7 +421,8 @@ impl HighReplay {
         self.reward.write(i, &[t.reward]);
         self.next_obs.write(i, t.next_obs);
         self.mask.write(i, &[t.mask]);
-        self.terminated.write(i, &[f32::from(u8::from(t.terminated))]);
+        self.terminated
+            .write(i, &[f32::from(u8::from(t.terminated))]);
         self.truncated.write(i, &[f32::from(u8::from(t.truncated))]);
     }
 
@@ -390,7 +447,12 @@ impl HighReplay {
 
     /// Staging sized for this buffer: head `[obs, goal]`, no tail.
     pub fn stage(&self, batch: usize) -> BatchStage {
-        BatchStage::new(batch, self.obs.width + self.goal.width, 0, self.action.width)
+        BatchStage::new(
+            batch,
+            self.obs.width + self.goal.width,
+            0,
+            self.action.width,
+        )
     }
 
     /// Writes row `idx` into slot `k` of `stage`. `terminal` = env `terminated` or `mask = 0`
@@ -400,8 +462,18 @@ impl HighReplay {
         let head_w = self.obs.width + self.goal.width;
         let goal = self.goal.row(idx);
         put_row(&mut stage.head, k, head_w, &[self.obs.row(idx), goal]);
-        put_row(&mut stage.next_head, k, head_w, &[self.next_obs.row(idx), goal]);
-        put_row(&mut stage.action, k, self.action.width, &[self.action.row(idx)]);
+        put_row(
+            &mut stage.next_head,
+            k,
+            head_w,
+            &[self.next_obs.row(idx), goal],
+        );
+        put_row(
+            &mut stage.action,
+            k,
+            self.action.width,
+            &[self.action.row(idx)],
+        );
         stage.reward[k] = self.reward.scalar(idx);
         let stop = self.terminated.scalar(idx) != 0.0 || self.mask.scalar(idx) == 0.0;
         stage.terminal[k] = f32::from(u8::from(stop));
@@ -410,7 +482,12 @@ impl HighReplay {
 
 /// Samples `stage.batch` indices uniformly (with replacement) from `0..len` and fills `stage`
 /// through `fill`. Invariant: `len ≥ 1` (callers sample only once a batch is stored).
-pub fn sample_into(rng: &mut Pcg64Mcg, len: usize, stage: &mut BatchStage, fill: impl Fn(&mut BatchStage, usize, usize)) {
+pub fn sample_into(
+    rng: &mut Pcg64Mcg,
+    len: usize,
+    stage: &mut BatchStage,
+    fill: impl Fn(&mut BatchStage, usize, usize),
+) {
     for k in 0..stage.batch {
         let idx = rng.random_range(0..len);
         fill(stage, k, idx);

@@ -10,7 +10,10 @@
 use candle_core::Device;
 use candle_nn::VarMap;
 use nets::weights::vars_under;
-use nets::{prefix, seeded_var_builder, GaussianPolicy, LowCritic, LowPolicy, NetsSpec, PolicySet, TwinCritic};
+use nets::{
+    prefix, seeded_var_builder, GaussianPolicy, LowCritic, LowPolicy, NetsSpec, PolicySet,
+    TwinCritic,
+};
 use protocol::Config;
 
 use crate::error::LearnerError;
@@ -39,35 +42,70 @@ pub struct Networks {
 }
 
 /// Builds every network of `spec` and both SAC levels.
-pub fn build_networks(config: &Config, spec: &NetsSpec, seed: u64) -> Result<Networks, LearnerError> {
+pub fn build_networks(
+    config: &Config,
+    spec: &NetsSpec,
+    seed: u64,
+) -> Result<Networks, LearnerError> {
     let device = Device::Cpu;
     let policy_vm = VarMap::new();
     let policies = PolicySet::new(spec, &seeded_var_builder(&policy_vm, seed, &device))?;
     let critic_vm = VarMap::new();
-    let (high_critic, low_critic) = critics(spec, &critic_vm, seed.wrapping_add(CRITIC_SEED_OFFSET))?;
+    let (high_critic, low_critic) =
+        critics(spec, &critic_vm, seed.wrapping_add(CRITIC_SEED_OFFSET))?;
     let target_vm = VarMap::new();
-    let (high_target, low_target) = critics(spec, &target_vm, seed.wrapping_add(TARGET_SEED_OFFSET))?;
+    let (high_target, low_target) =
+        critics(spec, &target_vm, seed.wrapping_add(TARGET_SEED_OFFSET))?;
     let LowPolicy::Gaussian(low_policy) = policies.low.clone() else {
         return Err(deterministic_unsupported());
     };
-    let maps = Maps { policy: &policy_vm, critic: &critic_vm, target: &target_vm };
-    let high_nets = maps.level(policies.high.clone(), prefix::HIGH_POLICY, high_critic, high_target, prefix::HIGH_CRITIC);
-    let low_nets = maps.level(low_policy, prefix::LOW_POLICY, low_critic, low_target, prefix::LOW_CRITIC);
+    let maps = Maps {
+        policy: &policy_vm,
+        critic: &critic_vm,
+        target: &target_vm,
+    };
+    let high_nets = maps.level(
+        policies.high.clone(),
+        prefix::HIGH_POLICY,
+        high_critic,
+        high_target,
+        prefix::HIGH_CRITIC,
+    );
+    let low_nets = maps.level(
+        low_policy,
+        prefix::LOW_POLICY,
+        low_critic,
+        low_target,
+        prefix::LOW_CRITIC,
+    );
     let high = SacLevel::new("high", high_nets, high_params(config, spec))?;
     let low = SacLevel::new("low", low_nets, low_params(config, spec))?;
-    Ok(Networks { policy_vm, critic_vm, target_vm, policies, high, low })
+    Ok(Networks {
+        policy_vm,
+        critic_vm,
+        target_vm,
+        policies,
+        high,
+        low,
+    })
 }
 
 /// The error for `learner.low.algo = "deterministic"`.
 pub fn deterministic_unsupported() -> LearnerError {
     LearnerError::Unsupported {
         key: "learner.low.algo",
-        reason: "the deterministic low-level variant is not trained by this learner yet; use \"sac\"".to_owned(),
+        reason:
+            "the deterministic low-level variant is not trained by this learner yet; use \"sac\""
+                .to_owned(),
     }
 }
 
 /// High and low twin critics on `vm`.
-fn critics(spec: &NetsSpec, vm: &VarMap, seed: u64) -> Result<(TwinCritic, TwinCritic), LearnerError> {
+fn critics(
+    spec: &NetsSpec,
+    vm: &VarMap,
+    seed: u64,
+) -> Result<(TwinCritic, TwinCritic), LearnerError> {
     let vb = seeded_var_builder(vm, seed, &Device::Cpu);
     let high = spec.high_critic(&vb.pp(prefix::HIGH_CRITIC))?;
     match spec.low_critic(&vb.pp(prefix::LOW_CRITIC))? {

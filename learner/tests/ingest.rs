@@ -32,7 +32,10 @@ fn ingest_fills_the_low_buffer_with_the_record_values() {
     assert!((reward - (-0.1 * 0.8)).abs() < 1e-6, "{reward}");
     assert!(!reached);
     let stats = l.ingest_stats();
-    assert_eq!((stats.chunks, stats.env_steps, stats.per_actor_steps[&1]), (1, 3, 3));
+    assert_eq!(
+        (stats.chunks, stats.env_steps, stats.per_actor_steps[&1]),
+        (1, 3, 3)
+    );
 }
 
 #[test]
@@ -52,7 +55,11 @@ fn three_segment_episode(l: &mut learner::Learner) {
     let mut all = steps(0..8, 9, 3, 7);
     all[4].success = true;
     ingest(l, 2, 9, 0, &all[0..2], START).unwrap();
-    assert_eq!(l.high_replay().ring().len(), 0, "no segment is complete yet");
+    assert_eq!(
+        l.high_replay().ring().len(),
+        0,
+        "no segment is complete yet"
+    );
     ingest(l, 2, 9, 1, &all[2..5], 0).unwrap();
     assert_eq!(l.high_replay().ring().len(), 1);
     ingest(l, 2, 9, 2, &all[5..8], END).unwrap();
@@ -78,10 +85,21 @@ fn high_transitions_sum_rewards_mask_success_and_cross_chunk_boundaries() {
         assert_eq!(h.reward, reward, "segment {i}");
         assert_eq!(h.next_obs, &[next_t, 9.0, 0.5], "segment {i}");
         assert_eq!(h.mask, mask, "segment {i}");
-        assert_eq!((h.terminated, h.truncated), (false, truncated), "segment {i}");
+        assert_eq!(
+            (h.terminated, h.truncated),
+            (false, truncated),
+            "segment {i}"
+        );
     }
     let stats = l.ingest_stats();
-    assert_eq!((stats.episodes_completed, stats.high_transitions, stats.env_steps), (1, 3, 8));
+    assert_eq!(
+        (
+            stats.episodes_completed,
+            stats.high_transitions,
+            stats.env_steps
+        ),
+        (1, 3, 8)
+    );
 }
 
 #[test]
@@ -89,7 +107,15 @@ fn a_terminating_step_closes_its_segment_as_terminated() {
     let mut l = learner();
     let mut all = steps(0..4, 1, 2, 99);
     all[3].terminated = true;
-    ingest(&mut l, 0, 1, 0, &all, START | TrajectoryFlags::EPISODE_END | TrajectoryFlags::TERMINATED).unwrap();
+    ingest(
+        &mut l,
+        0,
+        1,
+        0,
+        &all,
+        START | TrajectoryFlags::EPISODE_END | TrajectoryFlags::TERMINATED,
+    )
+    .unwrap();
     let h = l.high_replay().get(1);
     assert_eq!((h.reward, h.terminated, h.truncated), (-7.0, true, false));
     assert_eq!(h.next_obs, &[4.0, 1.0, 0.5]);
@@ -113,13 +139,34 @@ fn a_repeated_chunk_is_counted_as_duplicate_and_not_stored() {
     let all = steps(0..4, 3, 2, 99);
     ingest(&mut l, 0, 3, 0, &all[0..2], START).unwrap();
     let err = ingest(&mut l, 0, 3, 0, &all[0..2], START).unwrap_err();
-    assert!(matches!(err, LearnerError::DuplicateChunk { chunk_index: 0, expected: 1, .. }), "{err}");
+    assert!(
+        matches!(
+            err,
+            LearnerError::DuplicateChunk {
+                chunk_index: 0,
+                expected: 1,
+                ..
+            }
+        ),
+        "{err}"
+    );
     assert_eq!(l.low_replay().ring().len(), 2);
     ingest(&mut l, 0, 3, 1, &all[2..4], END).unwrap();
     // A late repeat after the episode ended is still recognised.
-    assert!(matches!(ingest(&mut l, 0, 3, 1, &all[2..4], END), Err(LearnerError::DuplicateChunk { .. })));
+    assert!(matches!(
+        ingest(&mut l, 0, 3, 1, &all[2..4], END),
+        Err(LearnerError::DuplicateChunk { .. })
+    ));
     let stats = l.ingest_stats();
-    assert_eq!((stats.duplicate_chunks, stats.chunks, stats.env_steps, stats.rejected_chunks), (2, 2, 4, 0));
+    assert_eq!(
+        (
+            stats.duplicate_chunks,
+            stats.chunks,
+            stats.env_steps,
+            stats.rejected_chunks
+        ),
+        (2, 2, 4, 0)
+    );
     assert_eq!(l.low_replay().ring().len(), 4);
 }
 
@@ -157,7 +204,9 @@ fn a_chunk_with_the_wrong_length_is_rejected_and_changes_nothing() {
     let records = steps(0..3, 0, 2, 99);
     let mut payload = layout().encode_chunk(&records).unwrap();
     payload.pop();
-    let err = l.ingest(&header(0, 0, 0, &records, START), &payload).unwrap_err();
+    let err = l
+        .ingest(&header(0, 0, 0, &records, START), &payload)
+        .unwrap_err();
     assert!(matches!(err, LearnerError::Rejected { .. }), "{err}");
     assert_unchanged(&l);
     assert_eq!(l.ingest_stats().rejected_chunks, 1);
@@ -186,10 +235,16 @@ fn a_chunk_of_another_layout_or_with_a_bad_record_is_rejected() {
     let mut h = header(0, 0, 0, &records, START);
     h.obs_dim = 4;
     let payload = vec![0.0; 2 * protocol::StepLayout::new(4, 2, 2, 2).unwrap().record_len()];
-    assert!(matches!(l.ingest(&h, &payload), Err(LearnerError::LayoutMismatch { .. })));
+    assert!(matches!(
+        l.ingest(&h, &payload),
+        Err(LearnerError::LayoutMismatch { .. })
+    ));
     let mut payload = layout().encode_chunk(&records).unwrap();
     payload[0] = f32::NAN;
-    assert!(matches!(l.ingest(&header(0, 0, 0, &records, START), &payload), Err(LearnerError::Rejected { .. })));
+    assert!(matches!(
+        l.ingest(&header(0, 0, 0, &records, START), &payload),
+        Err(LearnerError::Rejected { .. })
+    ));
     assert_unchanged(&l);
     assert_eq!(l.ingest_stats().rejected_chunks, 2);
 }
@@ -199,7 +254,10 @@ fn a_chunk_after_the_episode_end_is_rejected() {
     let mut l = learner();
     ingest(&mut l, 0, 0, 0, &steps(0..2, 0, 2, 1), START | END).unwrap();
     let err = ingest(&mut l, 0, 0, 1, &steps(2..3, 0, 2, 99), 0).unwrap_err();
-    assert!(matches!(err, LearnerError::AfterEpisodeEnd { last: 0, .. }), "{err}");
+    assert!(
+        matches!(err, LearnerError::AfterEpisodeEnd { last: 0, .. }),
+        "{err}"
+    );
     assert_eq!(l.ingest_stats().rejected_chunks, 1);
 }
 
@@ -210,5 +268,8 @@ fn episodes_of_different_actors_with_the_same_id_are_kept_apart() {
     ingest(&mut l, 1, 1, 0, &steps(0..2, 1, 2, 99), START).unwrap();
     let stats = l.ingest_stats();
     assert_eq!((stats.duplicate_chunks, stats.env_steps), (0, 4));
-    assert_eq!(stats.per_actor_steps.values().copied().collect::<Vec<_>>(), vec![2, 2]);
+    assert_eq!(
+        stats.per_actor_steps.values().copied().collect::<Vec<_>>(),
+        vec![2, 2]
+    );
 }

@@ -19,13 +19,28 @@ fn training_on_ingested_episodes_gives_finite_losses_and_metrics() {
     assert_eq!(p.updates_low, 16, "40 steps × 0.4");
     assert_eq!(p.updates_high, 20 - 4 + 1, "20 segments, min 4");
     let metrics = l.metrics();
-    for name in ["losses/low_critic", "losses/low_actor", "losses/high_critic", "losses/high_actor", "charts/updates_per_sec", "replay/low_size", "replay/high_size"] {
-        let value = metrics.iter().find(|(n, _)| *n == name).unwrap_or_else(|| panic!("{name} missing")).1;
+    for name in [
+        "losses/low_critic",
+        "losses/low_actor",
+        "losses/high_critic",
+        "losses/high_actor",
+        "charts/updates_per_sec",
+        "replay/low_size",
+        "replay/high_size",
+    ] {
+        let value = metrics
+            .iter()
+            .find(|(n, _)| *n == name)
+            .unwrap_or_else(|| panic!("{name} missing"))
+            .1;
         assert!(value.is_finite(), "{name} = {value}");
     }
     assert!(metrics.iter().all(|(_, v)| v.is_finite()));
     let get = |name| metrics.iter().find(|(n, _)| *n == name).unwrap().1;
-    assert_eq!((get("replay/low_size"), get("replay/high_size")), (40.0, 20.0));
+    assert_eq!(
+        (get("replay/low_size"), get("replay/high_size")),
+        (40.0, 20.0)
+    );
     assert!(get("losses/low_critic") > 0.0 && get("losses/high_critic") > 0.0);
 }
 
@@ -36,7 +51,10 @@ fn the_same_seed_gives_the_same_training() {
         ingest_episode(&mut l, 0, 0, 10, 2, 5);
         ingest_episode(&mut l, 0, 1, 10, 2, 5);
         l.train(usize::MAX).unwrap();
-        l.metrics().into_iter().filter(|(n, _)| n.starts_with("losses/")).collect::<Vec<_>>()
+        l.metrics()
+            .into_iter()
+            .filter(|(n, _)| n.starts_with("losses/"))
+            .collect::<Vec<_>>()
     };
     assert_eq!(run(), run());
 }
@@ -46,7 +64,16 @@ fn the_deterministic_low_variant_is_refused_with_a_clear_error() {
     let mut config = config();
     config.learner.low.algo = LowAlgo::Deterministic;
     let err = Learner::new(&config, DIMS, 0).err().expect("refused");
-    assert!(matches!(err, LearnerError::Unsupported { key: "learner.low.algo", .. }), "{err}");
+    assert!(
+        matches!(
+            err,
+            LearnerError::Unsupported {
+                key: "learner.low.algo",
+                ..
+            }
+        ),
+        "{err}"
+    );
 }
 
 #[test]
@@ -57,7 +84,10 @@ fn without_an_episode_length_the_caller_must_pass_the_task_length() {
     let err = Learner::new(&config, DIMS, 0).err().expect("refused");
     assert!(err.to_string().contains("env.episode_length"), "{err}");
     let l = Learner::with_episode_length(&config, DIMS, 500, 0).unwrap();
-    assert!((l.replay_ratio().low_per_env_step - 0.4).abs() < 1e-12, "200 / 500");
+    assert!(
+        (l.replay_ratio().low_per_env_step - 0.4).abs() < 1e-12,
+        "200 / 500"
+    );
 }
 
 #[test]
@@ -65,8 +95,14 @@ fn an_invalid_config_is_refused_with_every_problem() {
     let mut config = config();
     config.learner.low.gamma = 1.5;
     config.learner.high.lr = -1.0;
-    let err = Learner::new(&config, DIMS, 0).err().expect("refused").to_string();
-    assert!(err.contains("learner.low.gamma") && err.contains("learner.high.lr"), "{err}");
+    let err = Learner::new(&config, DIMS, 0)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        err.contains("learner.low.gamma") && err.contains("learner.high.lr"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -77,6 +113,11 @@ fn policy_lag_is_the_learner_version_minus_the_acting_version() {
     l.train(usize::MAX).unwrap();
     l.publish_due().unwrap().unwrap(); // version 1; chunks below were acted with version 0
     ingest_episode(&mut l, 0, 1, 4, 2, 4);
-    let lag = l.metrics().into_iter().find(|(n, _)| *n == "charts/policy_lag").unwrap().1;
+    let lag = l
+        .metrics()
+        .into_iter()
+        .find(|(n, _)| *n == "charts/policy_lag")
+        .unwrap()
+        .1;
     assert_eq!(lag, 1.0);
 }

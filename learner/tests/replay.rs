@@ -4,7 +4,10 @@ use learner::replay::{sample_into, Column, LowReplay, LowRewardSpec, LowTransiti
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 
-const REWARD: LowRewardSpec = LowRewardSpec { scale: 0.1, threshold: 0.1 };
+const REWARD: LowRewardSpec = LowRewardSpec {
+    scale: 0.1,
+    threshold: 0.1,
+};
 
 fn push(buffer: &mut LowReplay, t: f32) {
     let obs = [t, t, t];
@@ -26,7 +29,11 @@ fn nothing_is_allocated_before_the_first_row_and_blocks_grow_with_the_data() {
     let mut column = Column::new(29, 8_000_000);
     assert_eq!(column.allocated(), 0);
     column.write(0, &[1.0; 29]);
-    assert_eq!(column.allocated(), BLOCK_ROWS * 29, "one block, not the whole capacity");
+    assert_eq!(
+        column.allocated(),
+        BLOCK_ROWS * 29,
+        "one block, not the whole capacity"
+    );
     column.write(BLOCK_ROWS, &[2.0; 29]);
     assert_eq!(column.allocated(), 2 * BLOCK_ROWS * 29);
     assert_eq!(column.row(0), &[1.0; 29]);

@@ -14,7 +14,10 @@ fn flat(t: &Tensor) -> Vec<f32> {
 }
 
 fn close(a: f64, b: f64) {
-    assert!((a - b).abs() < 1e-4 * (1.0 + b.abs()), "{a} vs reference {b}");
+    assert!(
+        (a - b).abs() < 1e-4 * (1.0 + b.abs()),
+        "{a} vs reference {b}"
+    );
 }
 
 fn target() -> Tensor {
@@ -37,7 +40,12 @@ fn the_soft_target_bootstraps_only_where_not_terminal() {
 #[test]
 fn the_twin_critic_loss_sums_both_mean_squared_errors() {
     // Reference: critic_loss 3.11329236, q_means [-8.05, -7.825], target_mean -8.6762
-    let q = Tensor::from_slice(&[-9.0f32, -9.5, -1.0, -0.8, -1.2, -2.0, -21.0, -19.0], (4, 2), &Device::Cpu).unwrap();
+    let q = Tensor::from_slice(
+        &[-9.0f32, -9.5, -1.0, -0.8, -1.2, -2.0, -21.0, -19.0],
+        (4, 2),
+        &Device::Cpu,
+    )
+    .unwrap();
     let (loss, stats) = twin_critic_loss(&q, &target()).unwrap();
     close(f64::from(loss.to_scalar::<f32>().unwrap()), 3.113_292_36);
     close(stats.loss, 3.113_292_36);
@@ -49,7 +57,12 @@ fn the_twin_critic_loss_sums_both_mean_squared_errors() {
 #[test]
 fn the_actor_loss_is_alpha_log_prob_minus_min_q() {
     // Reference: actor_loss 3.45, entropy 0.25
-    let (loss, stats) = actor_loss(&col(&[-1.0, 0.5, 1.5, -2.0]), &col(&[-5.0, -4.0, -3.0, -2.0]), 0.2).unwrap();
+    let (loss, stats) = actor_loss(
+        &col(&[-1.0, 0.5, 1.5, -2.0]),
+        &col(&[-5.0, -4.0, -3.0, -2.0]),
+        0.2,
+    )
+    .unwrap();
     close(f64::from(loss.to_scalar::<f32>().unwrap()), 3.45);
     close(stats.entropy, 0.25);
 }
@@ -70,7 +83,16 @@ fn the_temperature_loss_and_its_gradient_match_the_reference() {
 fn losses_refuse_mismatched_shapes_and_name_the_tensor() {
     let q = Tensor::zeros((4, 3), candle_core::DType::F32, &Device::Cpu).unwrap();
     let err = twin_critic_loss(&q, &target()).unwrap_err();
-    assert!(matches!(err, LearnerError::Shape { what: "twin_critic_loss: q", .. }), "{err}");
+    assert!(
+        matches!(
+            err,
+            LearnerError::Shape {
+                what: "twin_critic_loss: q",
+                ..
+            }
+        ),
+        "{err}"
+    );
     assert!(err.to_string().contains("[4, 2]"), "{err}");
     let err = actor_loss(&col(&[1.0, 2.0]), &col(&[1.0]), 0.2).unwrap_err();
     assert!(err.to_string().contains("min_q"), "{err}");

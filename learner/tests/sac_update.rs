@@ -10,17 +10,39 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
-const PARAMS: SacParams = SacParams { gamma: 0.99, tau: 0.05, lr: 3e-3, alpha: 0.01, auto_alpha: false, target_entropy: -1.0 };
+const PARAMS: SacParams = SacParams {
+    gamma: 0.99,
+    tau: 0.05,
+    lr: 3e-3,
+    alpha: 0.01,
+    auto_alpha: false,
+    target_entropy: -1.0,
+};
 
 /// A 1-D state → 1-D action level with hidden [32, 32]; returns the maps too.
 fn level(params: SacParams) -> (SacLevel, VarMap, VarMap) {
     let cpu = Device::Cpu;
     let vm = VarMap::new();
     let vb = seeded_var_builder(&vm, 1, &cpu);
-    let policy = GaussianPolicy::new(&vb.pp("policy"), 1, &[32, 32], 1, 1.0, LinearInit::XavierUniform).unwrap();
-    let critic = TwinCritic::new(&vb.pp("critic"), 2, &[32, 32], LinearInit::XavierUniform).unwrap();
+    let policy = GaussianPolicy::new(
+        &vb.pp("policy"),
+        1,
+        &[32, 32],
+        1,
+        1.0,
+        LinearInit::XavierUniform,
+    )
+    .unwrap();
+    let critic =
+        TwinCritic::new(&vb.pp("critic"), 2, &[32, 32], LinearInit::XavierUniform).unwrap();
     let tvm = VarMap::new();
-    let target = TwinCritic::new(&seeded_var_builder(&tvm, 2, &cpu).pp("critic"), 2, &[32, 32], LinearInit::XavierUniform).unwrap();
+    let target = TwinCritic::new(
+        &seeded_var_builder(&tvm, 2, &cpu).pp("critic"),
+        2,
+        &[32, 32],
+        LinearInit::XavierUniform,
+    )
+    .unwrap();
     let nets = SacNets {
         policy,
         policy_vars: vars_under(&vm, "policy"),
@@ -40,8 +62,18 @@ fn tensor(values: &[f32]) -> Tensor {
 fn bandit_batch(rng: &mut Pcg64Mcg, b: usize) -> (SacBatch, Tensor, Tensor) {
     let s: Vec<f32> = (0..b).map(|_| rng.random_range(-1.0..1.0)).collect();
     let a: Vec<f32> = (0..b).map(|_| rng.random_range(-1.0..1.0)).collect();
-    let r: Vec<f32> = s.iter().zip(&a).map(|(s, a)| -4.0 * (a - 0.5 * s).powi(2)).collect();
-    let mut noise = || tensor(&(0..b).map(|_| StandardNormal.sample(rng)).collect::<Vec<f32>>());
+    let r: Vec<f32> = s
+        .iter()
+        .zip(&a)
+        .map(|(s, a)| -4.0 * (a - 0.5 * s).powi(2))
+        .collect();
+    let mut noise = || {
+        tensor(
+            &(0..b)
+                .map(|_| StandardNormal.sample(rng))
+                .collect::<Vec<f32>>(),
+        )
+    };
     let (e1, e2) = (noise(), noise());
     let batch = SacBatch {
         head: tensor(&s),
@@ -55,7 +87,10 @@ fn bandit_batch(rng: &mut Pcg64Mcg, b: usize) -> (SacBatch, Tensor, Tensor) {
 }
 
 fn values(vm: &VarMap, prefix: &str) -> Vec<Vec<f32>> {
-    vars_under(vm, prefix).iter().map(|v| v.as_tensor().flatten_all().unwrap().to_vec1().unwrap()).collect()
+    vars_under(vm, prefix)
+        .iter()
+        .map(|v| v.as_tensor().flatten_all().unwrap().to_vec1().unwrap())
+        .collect()
 }
 
 #[test]
@@ -86,15 +121,30 @@ fn sac_learns_the_best_action_of_a_contextual_bandit() {
         level.update(&batch, &e1, &e2).unwrap();
     }
     let s = [-0.8f32, -0.3, 0.0, 0.4, 0.9];
-    let action: Vec<f32> = level.policy().deterministic(&tensor(&s)).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let action: Vec<f32> = level
+        .policy()
+        .deterministic(&tensor(&s))
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
     for (s, a) in s.iter().zip(&action) {
-        assert!((a - 0.5 * s).abs() < 0.15, "state {s}: action {a}, best {}", 0.5 * s);
+        assert!(
+            (a - 0.5 * s).abs() < 0.15,
+            "state {s}: action {a}, best {}",
+            0.5 * s
+        );
     }
 }
 
 #[test]
 fn auto_alpha_moves_the_temperature() {
-    let (mut level, _vm, _tvm) = level(SacParams { auto_alpha: true, alpha: 0.2, ..PARAMS });
+    let (mut level, _vm, _tvm) = level(SacParams {
+        auto_alpha: true,
+        alpha: 0.2,
+        ..PARAMS
+    });
     let mut rng = Pcg64Mcg::seed_from_u64(5);
     let start = level.alpha().unwrap();
     assert!((start - 0.2).abs() < 1e-6);

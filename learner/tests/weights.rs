@@ -25,7 +25,11 @@ fn outputs(set: &PolicySet) -> Vec<Vec<f32>> {
 }
 
 /// A fresh actor-side set (other init seed) with `bytes` loaded after the header check.
-fn actor_set_from(l: &learner::Learner, header: &protocol::WeightsHeader, bytes: &[u8]) -> PolicySet {
+fn actor_set_from(
+    l: &learner::Learner,
+    header: &protocol::WeightsHeader,
+    bytes: &[u8],
+) -> PolicySet {
     let vm = VarMap::new();
     let set = PolicySet::new(l.nets_spec(), &seeded_var_builder(&vm, 999, &Device::Cpu)).unwrap();
     header.check(nets::layout_hash(&vm), bytes.len()).unwrap();
@@ -35,15 +39,25 @@ fn actor_set_from(l: &learner::Learner, header: &protocol::WeightsHeader, bytes:
 
 /// The learner's own current outputs (a PolicySet on its map shares its parameters).
 fn learner_outputs(l: &learner::Learner) -> Vec<Vec<f32>> {
-    let set = PolicySet::new(l.nets_spec(), &seeded_var_builder(l.policy_varmap(), 0, &Device::Cpu)).unwrap();
+    let set = PolicySet::new(
+        l.nets_spec(),
+        &seeded_var_builder(l.policy_varmap(), 0, &Device::Cpu),
+    )
+    .unwrap();
     outputs(&set)
 }
 
 #[test]
 fn published_weights_round_trip_into_a_fresh_policy_set() {
     let mut l = learner();
-    let (header, bytes) = l.publish_due().unwrap().expect("the initial weights are published first");
-    assert_eq!((header.policy_version, header.phi_version), (PolicyVersion(0), PhiVersion(0)));
+    let (header, bytes) = l
+        .publish_due()
+        .unwrap()
+        .expect("the initial weights are published first");
+    assert_eq!(
+        (header.policy_version, header.phi_version),
+        (PolicyVersion(0), PhiVersion(0))
+    );
     assert_eq!(header.layout_hash, l.weights_layout_hash());
     let actor = actor_set_from(&l, &header, &bytes);
     assert_eq!(outputs(&actor), learner_outputs(&l));
@@ -57,14 +71,23 @@ fn a_new_version_is_published_only_after_updates_and_the_interval_and_versions_g
     ingest_episode(&mut l, 0, 0, 10, 2, 5);
     assert!(l.publish_due().unwrap().is_none(), "no update has run yet");
     assert!(l.train(usize::MAX).unwrap() > 0);
-    let (second, bytes) = l.publish_due().unwrap().expect("updates ran and 10 steps arrived");
-    assert_eq!(second.policy_version, PolicyVersion(first.policy_version.0 + 1));
+    let (second, bytes) = l
+        .publish_due()
+        .unwrap()
+        .expect("updates ran and 10 steps arrived");
+    assert_eq!(
+        second.policy_version,
+        PolicyVersion(first.policy_version.0 + 1)
+    );
     assert_eq!(l.progress().policy_version, second.policy_version);
     let actor = actor_set_from(&l, &second, &bytes);
     assert_eq!(outputs(&actor), learner_outputs(&l));
     ingest_episode(&mut l, 0, 1, 4, 2, 4);
     l.train(usize::MAX).unwrap();
-    assert!(l.publish_due().unwrap().is_none(), "only 4 steps since the last publication");
+    assert!(
+        l.publish_due().unwrap().is_none(),
+        "only 4 steps since the last publication"
+    );
     ingest_episode(&mut l, 0, 2, 6, 2, 6);
     l.train(usize::MAX).unwrap();
     let (third, _) = l.publish_due().unwrap().unwrap();

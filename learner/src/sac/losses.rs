@@ -41,11 +41,20 @@ pub struct ActorStats {
 }
 
 /// `Err(Shape)` unless `t` is `[batch, cols]`.
-fn check_shape(what: &'static str, t: &Tensor, batch: usize, cols: usize) -> Result<(), LearnerError> {
+fn check_shape(
+    what: &'static str,
+    t: &Tensor,
+    batch: usize,
+    cols: usize,
+) -> Result<(), LearnerError> {
     if t.dims() == [batch, cols] {
         Ok(())
     } else {
-        Err(LearnerError::Shape { what, expected: format!("[{batch}, {cols}]"), got: t.dims().to_vec() })
+        Err(LearnerError::Shape {
+            what,
+            expected: format!("[{batch}, {cols}]"),
+            got: t.dims().to_vec(),
+        })
     }
 }
 
@@ -53,7 +62,11 @@ fn check_shape(what: &'static str, t: &Tensor, batch: usize, cols: usize) -> Res
 fn batch_of(what: &'static str, t: &Tensor) -> Result<usize, LearnerError> {
     match t.dims() {
         [batch, 1] => Ok(*batch),
-        got => Err(LearnerError::Shape { what, expected: "[batch, 1]".to_owned(), got: got.to_vec() }),
+        got => Err(LearnerError::Shape {
+            what,
+            expected: "[batch, 1]".to_owned(),
+            got: got.to_vec(),
+        }),
     }
 }
 
@@ -71,13 +84,18 @@ pub fn soft_target(
     check_shape("soft_target: terminal", terminal, batch, 1)?;
     check_shape("soft_target: next_min_q", next_min_q, batch, 1)?;
     check_shape("soft_target: next_log_prob", next_log_prob, batch, 1)?;
-    let soft_value = next_min_q.detach().sub(&next_log_prob.detach().affine(alpha, 0.0)?)?;
+    let soft_value = next_min_q
+        .detach()
+        .sub(&next_log_prob.detach().affine(alpha, 0.0)?)?;
     let continuation = terminal.affine(-gamma, gamma)?; // γ(1 − d)
     Ok(reward.add(&continuation.mul(&soft_value)?)?.detach())
 }
 
 /// The twin critic loss `mean((Q₁ − y)²) + mean((Q₂ − y)²)`; `q: [batch, 2]`, `target: [batch, 1]`.
-pub fn twin_critic_loss(q: &Tensor, target: &Tensor) -> Result<(Tensor, CriticStats), LearnerError> {
+pub fn twin_critic_loss(
+    q: &Tensor,
+    target: &Tensor,
+) -> Result<(Tensor, CriticStats), LearnerError> {
     let batch = batch_of("twin_critic_loss: target", target)?;
     check_shape("twin_critic_loss: q", q, batch, 2)?;
     let target = target.detach();
@@ -94,7 +112,11 @@ pub fn twin_critic_loss(q: &Tensor, target: &Tensor) -> Result<(Tensor, CriticSt
 }
 
 /// The actor loss `mean(α log π(ã|s) − min Q(s, ã))`; `log_prob`, `min_q`: `[batch, 1]`.
-pub fn actor_loss(log_prob: &Tensor, min_q: &Tensor, alpha: f64) -> Result<(Tensor, ActorStats), LearnerError> {
+pub fn actor_loss(
+    log_prob: &Tensor,
+    min_q: &Tensor,
+    alpha: f64,
+) -> Result<(Tensor, ActorStats), LearnerError> {
     let batch = batch_of("actor_loss: log_prob", log_prob)?;
     check_shape("actor_loss: min_q", min_q, batch, 1)?;
     let loss = log_prob.affine(alpha, 0.0)?.sub(min_q)?.mean_all()?;
@@ -107,7 +129,11 @@ pub fn actor_loss(log_prob: &Tensor, min_q: &Tensor, alpha: f64) -> Result<(Tens
 
 /// The temperature loss `mean(−exp(log α) · (log π + H̄))`, log π detached.
 /// `log_alpha`: `[1]`; `log_prob`: `[batch, 1]`.
-pub fn temperature_loss(log_alpha: &Tensor, log_prob: &Tensor, target_entropy: f64) -> Result<Tensor, LearnerError> {
+pub fn temperature_loss(
+    log_alpha: &Tensor,
+    log_prob: &Tensor,
+    target_entropy: f64,
+) -> Result<Tensor, LearnerError> {
     batch_of("temperature_loss: log_prob", log_prob)?;
     if log_alpha.dims() != [1] {
         return Err(LearnerError::Shape {
@@ -116,6 +142,10 @@ pub fn temperature_loss(log_alpha: &Tensor, log_prob: &Tensor, target_entropy: f
             got: log_alpha.dims().to_vec(),
         });
     }
-    let shifted = log_prob.detach().affine(1.0, target_entropy)?.mean_all()?.reshape(1)?;
+    let shifted = log_prob
+        .detach()
+        .affine(1.0, target_entropy)?
+        .mean_all()?
+        .reshape(1)?;
     Ok(log_alpha.exp()?.neg()?.mul(&shifted)?.sum_all()?)
 }

@@ -17,7 +17,9 @@ use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use nets::{GaussianPolicy, TwinCritic};
 
 use crate::error::LearnerError;
-use crate::sac::losses::{actor_loss, soft_target, temperature_loss, twin_critic_loss, ActorStats, CriticStats};
+use crate::sac::losses::{
+    actor_loss, soft_target, temperature_loss, twin_critic_loss, ActorStats, CriticStats,
+};
 
 /// Hyper-parameters of one level (from `[learner.high]` / `[learner.low]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,7 +91,11 @@ pub struct SacStats {
 #[derive(Debug)]
 enum Temperature {
     Fixed(f64),
-    Tuned { log_alpha: Var, opt: AdamW, target_entropy: f64 },
+    Tuned {
+        log_alpha: Var,
+        opt: AdamW,
+        target_entropy: f64,
+    },
 }
 
 impl Temperature {
@@ -100,13 +106,19 @@ impl Temperature {
         let init = params.alpha.max(f64::MIN_POSITIVE).ln() as f32;
         let log_alpha = Var::from_slice(&[init], 1, &candle_core::Device::Cpu)?;
         let opt = adam(vec![log_alpha.clone()], params.lr)?;
-        Ok(Self::Tuned { log_alpha, opt, target_entropy: params.target_entropy })
+        Ok(Self::Tuned {
+            log_alpha,
+            opt,
+            target_entropy: params.target_entropy,
+        })
     }
 
     fn alpha(&self) -> Result<f64, LearnerError> {
         Ok(match self {
             Self::Fixed(alpha) => *alpha,
-            Self::Tuned { log_alpha, .. } => f64::from(log_alpha.as_tensor().exp()?.sum_all()?.to_scalar::<f32>()?),
+            Self::Tuned { log_alpha, .. } => {
+                f64::from(log_alpha.as_tensor().exp()?.sum_all()?.to_scalar::<f32>()?)
+            }
         })
     }
 
@@ -114,7 +126,11 @@ impl Temperature {
     fn step(&mut self, log_prob: &Tensor) -> Result<f64, LearnerError> {
         match self {
             Self::Fixed(_) => Ok(0.0),
-            Self::Tuned { log_alpha, opt, target_entropy } => {
+            Self::Tuned {
+                log_alpha,
+                opt,
+                target_entropy,
+            } => {
                 let loss = temperature_loss(log_alpha.as_tensor(), log_prob, *target_entropy)?;
                 opt.backward_step(&loss)?;
                 Ok(f64::from(loss.to_scalar::<f32>()?))
@@ -125,7 +141,14 @@ impl Temperature {
 
 /// Adam (AdamW without weight decay).
 fn adam(vars: Vec<Var>, lr: f64) -> Result<AdamW, LearnerError> {
-    Ok(AdamW::new(vars, ParamsAdamW { lr, weight_decay: 0.0, ..ParamsAdamW::default() })?)
+    Ok(AdamW::new(
+        vars,
+        ParamsAdamW {
+            lr,
+            weight_decay: 0.0,
+            ..ParamsAdamW::default()
+        },
+    )?)
 }
 
 /// The networks of one level handed to [`SacLevel::new`].
@@ -158,7 +181,11 @@ pub struct SacLevel {
 
 impl SacLevel {
     /// A level; copies the online critic into the target.
-    pub fn new(level: &'static str, nets: SacNets, params: SacParams) -> Result<Self, LearnerError> {
+    pub fn new(
+        level: &'static str,
+        nets: SacNets,
+        params: SacParams,
+    ) -> Result<Self, LearnerError> {
         check_pairs(level, &nets.critic_vars, &nets.target_vars)?;
         for (target, online) in nets.target_vars.iter().zip(&nets.critic_vars) {
             target.set(online.as_tensor())?;
@@ -166,33 +193,69 @@ impl SacLevel {
         let policy_opt = adam(nets.policy_vars.clone(), params.lr)?;
         let critic_opt = adam(nets.critic_vars.clone(), params.lr)?;
         let temperature = Temperature::new(&params)?;
-        Ok(Self { level, nets, policy_opt, critic_opt, temperature, params })
+        Ok(Self {
+            level,
+            nets,
+            policy_opt,
+            critic_opt,
+            temperature,
+            params,
+        })
     }
 
     /// One update on `batch`; `next_eps` and `eps` are standard-normal noise `[B, action_dim]`
     /// for a' ~ π(·|s') and ã ~ π(·|s). Nothing is stepped if a loss is non-finite.
-    pub fn update(&mut self, batch: &SacBatch, next_eps: &Tensor, eps: &Tensor) -> Result<SacStats, LearnerError> {
+    pub fn update(
+        &mut self,
+        batch: &SacBatch,
+        next_eps: &Tensor,
+        eps: &Tensor,
+    ) -> Result<SacStats, LearnerError> {
         let alpha = self.temperature.alpha()?;
         let target = self.target(batch, next_eps, alpha)?;
         let critic = self.critic_step(batch, &target)?;
         let (actor, log_prob) = self.actor_step(batch, eps, alpha)?;
         let alpha_loss = self.temperature.step(&log_prob)?;
         self.polyak()?;
-        Ok(SacStats { critic, actor, alpha, alpha_loss })
+        Ok(SacStats {
+            critic,
+            actor,
+            alpha,
+            alpha_loss,
+        })
     }
 
     /// y under no-grad.
-    fn target(&self, batch: &SacBatch, next_eps: &Tensor, alpha: f64) -> Result<Tensor, LearnerError> {
+    fn target(
+        &self,
+        batch: &SacBatch,
+        next_eps: &Tensor,
+        alpha: f64,
+    ) -> Result<Tensor, LearnerError> {
         let next_in = batch.policy_input(&batch.next_head)?;
         let (next_action, next_log_prob) = self.nets.policy.sample(&next_in, next_eps)?;
         let next_q_in = batch.critic_input(&batch.next_head, &next_action.detach())?;
         let next_min_q = self.nets.target.min_q(&next_q_in)?;
-        soft_target(&batch.reward, &batch.terminal, &next_min_q, &next_log_prob, self.params.gamma, alpha)
+        soft_target(
+            &batch.reward,
+            &batch.terminal,
+            &next_min_q,
+            &next_log_prob,
+            self.params.gamma,
+            alpha,
+        )
     }
 
     /// One Adam step on L_Q.
-    fn critic_step(&mut self, batch: &SacBatch, target: &Tensor) -> Result<CriticStats, LearnerError> {
-        let q = self.nets.critic.forward(&batch.critic_input(&batch.head, &batch.action)?)?;
+    fn critic_step(
+        &mut self,
+        batch: &SacBatch,
+        target: &Tensor,
+    ) -> Result<CriticStats, LearnerError> {
+        let q = self
+            .nets
+            .critic
+            .forward(&batch.critic_input(&batch.head, &batch.action)?)?;
         let (loss, stats) = twin_critic_loss(&q, target)?;
         self.check_finite("critic loss", stats.loss)?;
         self.critic_opt.backward_step(&loss)?;
@@ -200,9 +263,20 @@ impl SacLevel {
     }
 
     /// One Adam step on L_π against the updated critic; returns log π(ã|s) for the temperature.
-    fn actor_step(&mut self, batch: &SacBatch, eps: &Tensor, alpha: f64) -> Result<(ActorStats, Tensor), LearnerError> {
-        let (action, log_prob) = self.nets.policy.sample(&batch.policy_input(&batch.head)?, eps)?;
-        let min_q = self.nets.critic.min_q(&batch.critic_input(&batch.head, &action)?)?;
+    fn actor_step(
+        &mut self,
+        batch: &SacBatch,
+        eps: &Tensor,
+        alpha: f64,
+    ) -> Result<(ActorStats, Tensor), LearnerError> {
+        let (action, log_prob) = self
+            .nets
+            .policy
+            .sample(&batch.policy_input(&batch.head)?, eps)?;
+        let min_q = self
+            .nets
+            .critic
+            .min_q(&batch.critic_input(&batch.head, &action)?)?;
         let (loss, stats) = actor_loss(&log_prob, &min_q, alpha)?;
         self.check_finite("actor loss", stats.loss)?;
         self.policy_opt.backward_step(&loss)?;
@@ -213,7 +287,10 @@ impl SacLevel {
     fn polyak(&self) -> Result<(), LearnerError> {
         let tau = self.params.tau;
         for (target, online) in self.nets.target_vars.iter().zip(&self.nets.critic_vars) {
-            let mixed = target.as_tensor().affine(1.0 - tau, 0.0)?.add(&online.as_tensor().affine(tau, 0.0)?)?;
+            let mixed = target
+                .as_tensor()
+                .affine(1.0 - tau, 0.0)?
+                .add(&online.as_tensor().affine(tau, 0.0)?)?;
             target.set(&mixed.detach())?;
         }
         Ok(())
@@ -223,7 +300,11 @@ impl SacLevel {
         if value.is_finite() {
             Ok(())
         } else {
-            Err(LearnerError::NonFinite { level: self.level, what, value })
+            Err(LearnerError::NonFinite {
+                level: self.level,
+                what,
+                value,
+            })
         }
     }
 
@@ -250,7 +331,8 @@ impl SacLevel {
 
 /// Online and target parameter lists must pair up one to one with equal shapes.
 fn check_pairs(level: &'static str, online: &[Var], target: &[Var]) -> Result<(), LearnerError> {
-    let same = online.len() == target.len() && online.iter().zip(target).all(|(a, b)| a.dims() == b.dims());
+    let same = online.len() == target.len()
+        && online.iter().zip(target).all(|(a, b)| a.dims() == b.dims());
     if same {
         Ok(())
     } else {

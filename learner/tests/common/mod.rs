@@ -4,12 +4,17 @@
 
 use learner::{Learner, TaskDims};
 use protocol::{
-    ActorId, Config, DecisionKind, EpisodeId, PolicyVersion, StepLayout, StepRecord, TrajectoryFlags,
-    TrajectoryHeader,
+    ActorId, Config, DecisionKind, EpisodeId, PolicyVersion, StepLayout, StepRecord,
+    TrajectoryFlags, TrajectoryHeader,
 };
 
 /// obs 3, goal 2, action 2 (bound 1), latent 2 (the config's φ size).
-pub const DIMS: TaskDims = TaskDims { obs_dim: 3, goal_dim: 2, action_dim: 2, action_scale: 1.0 };
+pub const DIMS: TaskDims = TaskDims {
+    obs_dim: 3,
+    goal_dim: 2,
+    action_dim: 2,
+    action_scale: 1.0,
+};
 
 /// A small config that validates: c = 2, capacity 256, batches of 4, tiny networks,
 /// low ratio 0.4 (explicit), publish every 10 env steps, slack 10.
@@ -82,7 +87,13 @@ pub fn steps(range: std::ops::Range<usize>, ep: u64, every: usize, last: usize) 
 }
 
 /// A valid header for `records` as chunk `chunk` of episode `ep` from `actor`.
-pub fn header(actor: u32, ep: u64, chunk: u32, records: &[StepRecord], flags: u32) -> TrajectoryHeader {
+pub fn header(
+    actor: u32,
+    ep: u64,
+    chunk: u32,
+    records: &[StepRecord],
+    flags: u32,
+) -> TrajectoryHeader {
     let mut h = TrajectoryHeader::for_layout(&layout()).unwrap();
     h.actor_id = ActorId(actor);
     h.episode_id = EpisodeId(ep);
@@ -95,13 +106,27 @@ pub fn header(actor: u32, ep: u64, chunk: u32, records: &[StepRecord], flags: u3
 }
 
 /// Encodes and ingests one chunk.
-pub fn ingest(l: &mut Learner, actor: u32, ep: u64, chunk: u32, records: &[StepRecord], flags: u32) -> Result<(), learner::LearnerError> {
+pub fn ingest(
+    l: &mut Learner,
+    actor: u32,
+    ep: u64,
+    chunk: u32,
+    records: &[StepRecord],
+    flags: u32,
+) -> Result<(), learner::LearnerError> {
     let payload = layout().encode_chunk(records).unwrap();
     l.ingest(&header(actor, ep, chunk, records, flags), &payload)
 }
 
 /// Ingests a full episode of `len` steps (decisions every `every`) in chunks of `chunk` steps.
-pub fn ingest_episode(l: &mut Learner, actor: u32, ep: u64, len: usize, every: usize, chunk: usize) {
+pub fn ingest_episode(
+    l: &mut Learner,
+    actor: u32,
+    ep: u64,
+    len: usize,
+    every: usize,
+    chunk: usize,
+) {
     let all = steps(0..len, ep, every, len - 1);
     for (i, part) in all.chunks(chunk).enumerate() {
         let mut flags = 0;
