@@ -132,6 +132,7 @@ impl Learner {
         let explicit = config.learner.low.updates_per_env_step.is_some();
         match config.env.episode_length {
             Some(length) => Self::with_episode_length(config, dims, length, seed),
+            // The length only derives the ratio, which is explicit here: any value will do.
             None if explicit => Self::with_episode_length(config, dims, 1, seed),
             None => Err(LearnerError::Unsupported {
                 key: "env.episode_length",
