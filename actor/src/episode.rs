@@ -145,7 +145,7 @@ impl Episode {
 
     /// At t mod c = 0: a new delta from the episode's source and `subgoal = φ(s_t) + delta`.
     fn decide_if_due(&mut self, rollout: &mut Rollout) -> Result<DecisionKind, ActorError> {
-        if self.t % rollout.params.c != 0 {
+        if !self.t.is_multiple_of(rollout.params.c) {
             return Ok(DecisionKind::None);
         }
         let inputs = DecisionInputs {
