@@ -18,7 +18,7 @@ pub fn run(args: &GraphArgs) -> anyhow::Result<()> {
     let run_id = read_run_id(&args.run_dir)?;
     let ctx = RunContext::open(&args.run_dir, run_id.as_str())?;
     let node = open_node(&run_id.node_name(&format!("graph-tool-{}", std::process::id())))?;
-    let (_, layout) = crate::proc::common::task_dims(&ctx.config)?;
+    let layout = crate::proc::common::task_info(&ctx.config)?.layout;
     let client = crate::channels::Channels::new(&ctx.config, &run_id, &layout).graph_client(&node)?;
     let request = match args.command {
         GraphCommand::Stats => GraphRequest::Stats,

@@ -12,8 +12,7 @@ use graph_service::GraphService;
 use learner::Learner;
 use protocol::ActorId;
 
-use crate::proc::actor::actor_seed;
-use crate::proc::common::task_dims;
+use crate::proc::common::task_info;
 use crate::run::RunContext;
 
 /// Updates per `train` call while catching up with the replay ratio.
@@ -21,12 +20,13 @@ const UPDATE_BURST: usize = 64;
 
 pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
-    let (dims, _) = task_dims(config)?;
+    let task = task_info(config)?;
+    let dims = task.dims;
     let seed = config.run.seed;
-    let mut learner = Learner::new(config, dims, seed).context("building the learner")?;
+    let mut learner = Learner::with_episode_length(config, dims, task.episode_length, seed).context("building the learner")?;
     let mut graph = GraphService::new(config, dims, seed).context("building the graph-service")?;
     let mut actors = (0..config.run.n_actors as u32)
-        .map(|id| Actor::new(config, ActorId(id), actor_seed(seed, id, 0)))
+        .map(|id| Actor::new(config, ActorId(id), seed))
         .collect::<Result<Vec<_>, _>>()
         .context("building the actors")?;
     let mut metrics = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);

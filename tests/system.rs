@@ -200,5 +200,8 @@ fn a_killed_actor_is_restarted_and_the_run_continues() {
     assert!(status.success(), "launcher exit: {status}");
     let restarted = run.status("actor-0-1");
     assert!(as_u64(&restarted, "published_steps") > 0, "the restarted actor produced data: {restarted}");
+    let learner = run.status("learner");
+    assert_eq!(as_u64(&learner, "duplicate_chunks"), 0, "restarted actor reused no episode id: {learner}");
+    assert_eq!(as_u64(&learner, "rejected_chunks"), 0, "{learner}");
     assert_eq!(leftovers_of(&run.run_id()), Vec::<String>::new());
 }

@@ -325,6 +325,21 @@ impl Actor {
         Ok(())
     }
 
+    /// Makes the next episode the `episode`-th of this actor (its id, env seed and schedule
+    /// position follow from it). A restarted actor process starts at a fresh range
+    /// (e.g. `incarnation << 28`) so its episode ids never repeat ids the learner has seen.
+    /// Only allowed before the first episode starts.
+    pub fn start_at_episode(&mut self, episode: u64) -> Result<(), ActorError> {
+        if self.episode.is_some() || self.n_episodes_started > 0 {
+            return Err(ActorError::Misuse(format!(
+                "start_at_episode({episode}) after {} episodes already started",
+                self.n_episodes_started
+            )));
+        }
+        self.n_episodes_started = episode;
+        Ok(())
+    }
+
     /// Counters for metrics.
     pub fn stats(&self) -> ActorStats {
         ActorStats {

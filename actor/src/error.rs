@@ -23,6 +23,10 @@ pub enum ActorError {
         /// What does not fit and how to fix it.
         reason: String,
     },
+    /// A method was called in a state that does not allow it (e.g. `start_at_episode` after
+    /// stepping began).
+    #[error("actor misuse: {0}")]
+    Misuse(String),
     /// The environment could not be built or refused an action.
     #[error("environment error: {0}")]
     Env(#[from] envs::api::EnvError),

@@ -1,11 +1,8 @@
 //! Parameter sets as bytes: safetensors serialisation of a [`VarMap`], strict loading, the
 //! layout hash that receivers check, and subsets (e.g. only the actor-side networks).
 //!
-//! Layout-hash contract (the `protocol` crate carries the same function; keep them equal):
-//! for every tensor, the line `name:d0xd1x…` (dims in decimal joined by `x`; a scalar gives
-//! `name:`); the lines sorted bytewise and joined by `\n` (no trailing newline); the hash is
-//! FNV-1a 64 of those UTF-8 bytes (offset basis `0xcbf29ce484222325`, prime `0x100000001b3`).
-//! It covers names and shapes, not dtypes or values.
+//! Layout hash: [`protocol::layout_hash`] over every tensor's name and shape (one definition
+//! for every sender and receiver). It covers names and shapes, not dtypes or values.
 //!
 //! Invariants:
 //! - Serialisation is deterministic: tensors sorted by name, no metadata; values bit-exact.
@@ -22,35 +19,12 @@ use safetensors::SafeTensors;
 
 use crate::error::{NetsError, Result};
 
-/// FNV-1a 64-bit offset basis.
-const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-/// FNV-1a 64-bit prime.
-const FNV_PRIME: u64 = 0x0000_0100_0000_01b3;
-
-/// FNV-1a 64 of `bytes`.
-pub fn fnv1a_64(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(FNV_OFFSET, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(FNV_PRIME)
-    })
-}
-
-/// The layout line of one tensor: `name:d0xd1x…`.
-pub fn layout_line(name: &str, dims: &[usize]) -> String {
-    let dims: Vec<String> = dims.iter().map(|d| d.to_string()).collect();
-    format!("{name}:{}", dims.join("x"))
-}
-
 /// The layout hash of `(name, dims)` entries (any order), per the contract in the module doc.
 pub fn layout_hash_of<'a, I>(entries: I) -> u64
 where
     I: IntoIterator<Item = (&'a str, &'a [usize])>,
 {
-    let mut lines: Vec<String> = entries
-        .into_iter()
-        .map(|(n, d)| layout_line(n, d))
-        .collect();
-    lines.sort_unstable();
-    fnv1a_64(lines.join("\n").as_bytes())
+    protocol::layout_hash(entries)
 }
 
 /// The layout hash of every parameter in `varmap`.

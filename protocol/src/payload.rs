@@ -75,7 +75,8 @@ wire_id!(
     PhiVersion(u64)
 );
 wire_id!(
-    /// An episode, unique within its actor (the pair (actor, episode) is unique in a run).
+    /// An episode, unique within a run: `(actor_id << 40) | episode index`, where a restarted
+    /// actor starts its index at `incarnation << 28` (see the actor crate's `seeds`).
     EpisodeId(u64)
 );
 

@@ -143,12 +143,17 @@ def steps_per_sec(m, d, steps=2000, repeats=5):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", help="also write the JSON to this file")
+    ap.add_argument("--speed-only", action="store_true",
+                    help="only time control steps; print `mujoco_env_steps_per_sec: N` (median of 5)")
     args = ap.parse_args()
 
     m = mujoco.MjModel.from_xml_path(XML)
     d = mujoco.MjData(m)
     assert [m.actuator(i).name.removeprefix("m_") for i in range(m.nu)] == ACTUATOR_ORDER
     assert m.opt.timestep == 0.02 and m.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+    if args.speed_only:
+        print(f"mujoco_env_steps_per_sec: {steps_per_sec(m, d):.0f}")
+        return
 
     result = {
         "engine": "mujoco",

@@ -16,7 +16,7 @@ use iceoryx2::prelude::*;
 use protocol::{ControlCommand, ControlMessage};
 
 use crate::channels::Channels;
-use crate::proc::common::{node, task_dims};
+use crate::proc::common::{node, task_info};
 use crate::run::RunContext;
 use children::{ChildKind, Children};
 use metrics::MetricsBook;
@@ -37,7 +37,7 @@ enum Ending {
 
 pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
-    let (_, layout) = task_dims(config)?;
+    let layout = task_info(config)?.layout;
     let node = node(&ctx, "launcher")?;
     clean_stale_resources(&node);
     let channels = Channels::new(config, &ctx.run_id, &layout);

@@ -23,8 +23,8 @@ pub struct ActorArgs {
 
 pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     let config = &ctx.config;
-    let seed = actor_seed(config.run.seed, args.actor_id, args.incarnation);
-    let mut actor = Actor::new(config, ActorId(args.actor_id), seed).context("building the actor")?;
+    let mut actor = Actor::new(config, ActorId(args.actor_id), config.run.seed).context("building the actor")?;
+    actor.start_at_episode(first_episode(args.incarnation))?;
     let node = node(ctx, &format!("actor-{}", args.actor_id))?;
     let channels = Channels::new(config, &ctx.run_id, &actor.layout());
     let trajectories = channels.trajectory_publisher(&node)?;
@@ -71,9 +71,12 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     )
 }
 
-/// Each (actor, incarnation) gets its own random stream derived from the run seed.
-pub fn actor_seed(run_seed: u64, actor_id: u32, incarnation: u32) -> u64 {
-    run_seed.wrapping_add(1 + u64::from(actor_id)).wrapping_add(u64::from(incarnation) << 32)
+/// Episodes per incarnation range: a restarted actor starts at `incarnation × 2^28`, so its
+/// episode ids (and env seeds) never repeat those of its earlier incarnations.
+const EPISODE_RANGE_BITS: u32 = 28;
+
+pub fn first_episode(incarnation: u32) -> u64 {
+    u64::from(incarnation) << EPISODE_RANGE_BITS
 }
 
 /// Loads the newest weights message, if any; a rejected one is logged and counted by the actor.

@@ -11,9 +11,17 @@ use protocol::{Config, MetricsSample, ProcessRole, StepLayout};
 
 use crate::run::RunContext;
 
+/// What the processes need to know about the run's task.
+pub struct TaskInfo {
+    pub dims: TaskDims,
+    pub layout: StepLayout,
+    /// Episode length in control steps (the task's own, or `env.episode_length`).
+    pub episode_length: u32,
+}
+
 /// Builds the run's environment once to learn its dimensions (and to fail early, with the
 /// registry's list of names, on an unknown task).
-pub fn task_dims(config: &Config) -> anyhow::Result<(TaskDims, StepLayout)> {
+pub fn task_info(config: &Config) -> anyhow::Result<TaskInfo> {
     let options = envs::EnvOptions { max_steps: config.env.episode_length };
     let env = envs::make_with(&config.env.task, options).with_context(|| format!("building task `{}`", config.env.task))?;
     let spec = env.spec();
@@ -24,7 +32,7 @@ pub fn task_dims(config: &Config) -> anyhow::Result<(TaskDims, StepLayout)> {
         action_scale: f64::from(spec.action_high.iter().copied().fold(0.0f32, f32::max)),
     };
     let layout = StepLayout::new(spec.obs_dim, spec.action_dim, spec.goal_dim, config.encoder.out_dim)?;
-    Ok((dims, layout))
+    Ok(TaskInfo { dims, layout, episode_length: spec.max_steps })
 }
 
 /// The process's iceoryx2 node, named after run and role.

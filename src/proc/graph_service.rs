@@ -9,7 +9,7 @@ use iceoryx2::prelude::*;
 use protocol::transport::Ipc;
 use protocol::{ControlCommand, ProcessRole};
 
-use super::common::{node, task_dims, MetricsOut, StopWatch};
+use super::common::{node, task_info, MetricsOut, StopWatch};
 use crate::channels::{Channels, TrajectorySubscriber, WeightsSubscriber};
 use crate::run::RunContext;
 
@@ -18,7 +18,8 @@ const IDLE_WAIT: Duration = Duration::from_millis(100);
 
 pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
-    let (dims, layout) = task_dims(config)?;
+    let task = task_info(config)?;
+    let (dims, layout) = (task.dims, task.layout);
     let mut service = GraphService::new(config, dims, config.run.seed).context("building the graph-service")?;
     let node = node(ctx, "graph-service")?;
     let channels = Channels::new(config, &ctx.run_id, &layout);

@@ -10,7 +10,7 @@ use learner::Learner;
 use protocol::transport::{Ipc, ValuePublisher};
 use protocol::{ControlCommand, ProcessRole, ProgressMessage, PROTOCOL_VERSION};
 
-use super::common::{node, task_dims, MetricsOut, StopWatch};
+use super::common::{node, task_info, MetricsOut, StopWatch};
 use crate::channels::{Channels, WeightsPublisher};
 use crate::run::RunContext;
 
@@ -23,8 +23,9 @@ const RECONNECT_INTERVAL: Duration = Duration::from_millis(500);
 
 pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
-    let (dims, layout) = task_dims(config)?;
-    let mut learner = Learner::new(config, dims, config.run.seed).context("building the learner")?;
+    let task = task_info(config)?;
+    let layout = task.layout;
+    let mut learner = Learner::with_episode_length(config, task.dims, task.episode_length, config.run.seed).context("building the learner")?;
     let node = node(ctx, "learner")?;
     let channels = Channels::new(config, &ctx.run_id, &layout);
     let trajectories = channels.trajectory_subscriber(&node)?;
