@@ -205,3 +205,22 @@ fn a_killed_actor_is_restarted_and_the_run_continues() {
     assert_eq!(as_u64(&learner, "rejected_chunks"), 0, "{learner}");
     assert_eq!(leftovers_of(&run.run_id()), Vec::<String>::new());
 }
+
+#[test]
+fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let short = ["--serial", "--set", "run.max_episodes=6", "--seed", "5"];
+    let mut first = Run::start("serial-a", &short);
+    assert!(first.wait().success());
+    let mut second = Run::start("serial-b", &short);
+    assert!(second.wait().success());
+    let a = std::fs::read_to_string(first.dir.join("metrics.jsonl")).unwrap();
+    let b = std::fs::read_to_string(second.dir.join("metrics.jsonl")).unwrap();
+    assert!(a.lines().count() >= 3, "a line whenever episodes completed: {a}");
+    assert!(a.contains("losses/low_critic"), "training ran: {a}");
+    assert_eq!(a, b, "same seed, same metrics");
+    let mut other = Run::start("serial-c", &["--serial", "--set", "run.max_episodes=6", "--seed", "6"]);
+    assert!(other.wait().success());
+    let c = std::fs::read_to_string(other.dir.join("metrics.jsonl")).unwrap();
+    assert_ne!(a, c, "another seed gives another run");
+}
