@@ -8,7 +8,7 @@ use actor::Actor;
 use anyhow::Context;
 use protocol::{ActorId, ProcessRole, ProgressMessage};
 
-use super::common::{node, MetricsOut, StopWatch};
+use super::common::{newest_weights, node, MetricsOut, StopWatch};
 use crate::channels::{Channels, WeightsSubscriber};
 use crate::run::RunContext;
 
@@ -81,12 +81,7 @@ pub fn first_episode(incarnation: u32) -> u64 {
 
 /// Loads the newest weights message, if any; a rejected one is logged and counted by the actor.
 fn load_new_weights(actor: &mut Actor, weights: &WeightsSubscriber) {
-    let mut newest: Option<(protocol::WeightsHeader, Vec<u8>)> = None;
-    let drained = weights.drain(|header, bytes| newest = Some((*header, bytes.to_vec())));
-    if let Err(err) = drained {
-        tracing::warn!("receiving weights failed: {err:#}");
-    }
-    if let Some((header, bytes)) = newest {
+    if let Some((header, bytes)) = newest_weights(weights) {
         if let Err(err) = actor.load_weights(&header, &bytes) {
             tracing::error!("refused weights: {err:#}");
         }

@@ -104,3 +104,13 @@ impl MetricsOut {
         self.last = Some(Instant::now());
     }
 }
+
+/// The newest weights message waiting on `weights`, if any (older ones are superseded).
+/// A receive failure is logged; the caller simply keeps its current weights.
+pub fn newest_weights(weights: &crate::channels::WeightsSubscriber) -> Option<(protocol::WeightsHeader, Vec<u8>)> {
+    let mut newest = None;
+    if let Err(err) = weights.drain(|header, bytes| newest = Some((*header, bytes.to_vec()))) {
+        tracing::warn!("receiving weights failed: {err:#}");
+    }
+    newest
+}

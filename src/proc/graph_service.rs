@@ -9,7 +9,7 @@ use iceoryx2::prelude::*;
 use protocol::transport::Ipc;
 use protocol::{ControlCommand, ProcessRole};
 
-use super::common::{node, task_info, MetricsOut, StopWatch};
+use super::common::{newest_weights, node, task_info, MetricsOut, StopWatch};
 use crate::channels::{Channels, TrajectorySubscriber, WeightsSubscriber};
 use crate::run::RunContext;
 
@@ -79,11 +79,7 @@ fn ingest_all(service: &mut GraphService, trajectories: &TrajectorySubscriber) {
 }
 
 fn load_new_weights(service: &mut GraphService, weights: &WeightsSubscriber) {
-    let mut newest: Option<(protocol::WeightsHeader, Vec<u8>)> = None;
-    if let Err(err) = weights.drain(|header, bytes| newest = Some((*header, bytes.to_vec()))) {
-        tracing::warn!("receiving weights failed: {err:#}");
-    }
-    if let Some((header, bytes)) = newest {
+    if let Some((header, bytes)) = newest_weights(weights) {
         if let Err(err) = service.load_weights(&header, &bytes) {
             tracing::error!("refused weights: {err:#}");
         }
