@@ -26,15 +26,15 @@ pub use error::ProtocolError;
 pub use graph::{decode, encode, GraphRequest, GraphResponse, LatentPoint};
 pub use payload::{
     check_version, ActorId, ControlCommand, ControlMessage, EpisodeId, MetricsSample, PhiVersion,
-    PolicyVersion, ProcessRole, ProgressMessage, TrajectoryFlags, TrajectoryHeader, Versioned,
-    WeightsHeader,
+    PolicyVersion, ProcessRole, ProgressMessage, RunSchedule, TrajectoryFlags, TrajectoryHeader,
+    Versioned, WeightsHeader,
 };
 pub use services::{RunId, RunIdError, Service};
 pub use step::{DecisionKind, StepLayout, StepRecord, StepView};
 
 /// Version of the wire format. Bump it whenever a payload type, header, step record layout or
 /// postcard message changes shape or meaning; processes of different versions refuse each other.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// FNV-1a 64-bit offset basis.
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;

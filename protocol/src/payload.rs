@@ -233,7 +233,7 @@ impl Versioned for TrajectoryHeader {
 /// User header of a weights message (`asi/<run>/weights`, payload `[u8]` safetensors bytes of
 /// the policy and φ networks, history 1).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("asi::WeightsHeader")]
 pub struct WeightsHeader {
     /// Version of the policy tensors in the payload.
@@ -248,6 +248,33 @@ pub struct WeightsHeader {
     pub protocol_version: u32,
     /// Zero; keeps the struct free of implicit padding.
     pub reserved: u32,
+    /// The run-wide schedules at publication time (the learner is their single source).
+    pub schedule: RunSchedule,
+}
+
+/// Run-wide schedule values the learner computes from every actor's episodes and broadcasts
+/// with each weights message, so that all actors (and serial mode) gate on the same global
+/// counts instead of their own share of the episodes (SPEC §6.4, §6.6).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("asi::RunSchedule")]
+pub struct RunSchedule {
+    /// Training episodes completed and ingested by the learner, over all actors ("epoch" of the
+    /// reference code: gates HESS exploration, the potential term and the push).
+    pub train_episodes: u64,
+    /// Probability that a high-level decision uses the HESS count-based subgoal (SPEC §6.4).
+    pub count_prob: f32,
+    /// Probability that a training episode is a frontier-reaching episode (SPEC §6.6).
+    pub fr_prob: f32,
+}
+
+impl RunSchedule {
+    /// The schedule before any episode: count exploration certain, no FR episodes.
+    pub const START: RunSchedule = RunSchedule {
+        train_episodes: 0,
+        count_prob: 1.0,
+        fr_prob: 0.0,
+    };
 }
 
 impl WeightsHeader {
@@ -265,7 +292,14 @@ impl WeightsHeader {
             byte_len: byte_len as u64,
             protocol_version: PROTOCOL_VERSION,
             reserved: 0,
+            schedule: RunSchedule::START,
         }
+    }
+
+    /// The same header carrying `schedule`.
+    pub fn with_schedule(mut self, schedule: RunSchedule) -> Self {
+        self.schedule = schedule;
+        self
     }
 
     /// Checks version, the receiver's `expected_layout_hash` and the payload length.

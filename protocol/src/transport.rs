@@ -36,9 +36,17 @@ pub enum TransportError {
     #[error("cannot open service `{service}`: {reason}")]
     Open { service: String, reason: String },
     #[error("cannot create a {port} port on `{service}`: {reason}")]
-    Port { service: String, port: &'static str, reason: String },
+    Port {
+        service: String,
+        port: &'static str,
+        reason: String,
+    },
     #[error("payload of {len} elements exceeds the maximum {max} of `{service}`")]
-    TooLong { service: String, len: usize, max: usize },
+    TooLong {
+        service: String,
+        len: usize,
+        max: usize,
+    },
     #[error("send on `{service}` failed: {reason}")]
     Send { service: String, reason: String },
     #[error("receive on `{service}` failed: {reason}")]
@@ -78,7 +86,10 @@ pub fn open_node(node_name: &str) -> Result<Node<Ipc>, TransportError> {
     NodeBuilder::new()
         .name(&name)
         .create::<Ipc>()
-        .map_err(|e| TransportError::Node { name: node_name.to_owned(), reason: format!("{e:?}") })
+        .map_err(|e| TransportError::Node {
+            name: node_name.to_owned(),
+            reason: format!("{e:?}"),
+        })
 }
 
 fn service_name(name: &str) -> Result<ServiceName, TransportError> {
@@ -88,7 +99,8 @@ fn service_name(name: &str) -> Result<ServiceName, TransportError> {
     })
 }
 
-type SliceService<T, H> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, [T], H>;
+type SliceService<T, H> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, [T], H>;
 type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
 
 fn open_services<T, H>(
@@ -101,7 +113,10 @@ where
     H: Debug + Default + ZeroCopySend + 'static,
 {
     let sn = service_name(name)?;
-    let open_err = |e: &dyn Debug| TransportError::Open { service: name.to_owned(), reason: format!("{e:?}") };
+    let open_err = |e: &dyn Debug| TransportError::Open {
+        service: name.to_owned(),
+        reason: format!("{e:?}"),
+    };
     let data = node
         .service_builder(&sn)
         .publish_subscribe::<[T]>()
@@ -161,8 +176,16 @@ where
             .backpressure_strategy(strategy)
             .create()
             .map_err(|e| port_err("publisher", &e))?;
-        let notifier = events.notifier_builder().create().map_err(|e| port_err("notifier", &e))?;
-        Ok(Self { name: name.to_owned(), max_slice_len: shape.max_slice_len, publisher, notifier })
+        let notifier = events
+            .notifier_builder()
+            .create()
+            .map_err(|e| port_err("notifier", &e))?;
+        Ok(Self {
+            name: name.to_owned(),
+            max_slice_len: shape.max_slice_len,
+            publisher,
+            notifier,
+        })
     }
 
     /// Sends `payload` with `header` and wakes the subscribers. Returns how many received it.
@@ -174,10 +197,19 @@ where
                 max: self.max_slice_len,
             });
         }
-        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
-        let mut sample = self.publisher.loan_slice_uninit(payload.len()).map_err(|e| send_err(&e))?;
+        let send_err = |e: &dyn Debug| TransportError::Send {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
+        let mut sample = self
+            .publisher
+            .loan_slice_uninit(payload.len())
+            .map_err(|e| send_err(&e))?;
         *sample.user_header_mut() = header;
-        let delivered = sample.write_from_slice(payload).send().map_err(|e| send_err(&e))?;
+        let delivered = sample
+            .write_from_slice(payload)
+            .send()
+            .map_err(|e| send_err(&e))?;
         self.notifier.notify().map_err(|e| send_err(&e))?;
         Ok(delivered)
     }
@@ -185,8 +217,13 @@ where
     /// Connects subscribers that appeared since the last send and hands them the history
     /// (e.g. the latest weights to a restarted actor). Call it on a timer.
     pub fn update_connections(&self) -> Result<(), TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
-        self.publisher.update_connections().map_err(|e| send_err(&e))?;
+        let send_err = |e: &dyn Debug| TransportError::Send {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
+        self.publisher
+            .update_connections()
+            .map_err(|e| send_err(&e))?;
         self.notifier.notify().map_err(|e| send_err(&e))?;
         Ok(())
     }
@@ -208,7 +245,11 @@ where
     T: Debug + Copy + ZeroCopySend + 'static,
     H: Debug + Default + ZeroCopySend + 'static,
 {
-    pub fn open(node: &Node<Ipc>, name: &str, shape: &ChannelShape) -> Result<Self, TransportError> {
+    pub fn open(
+        node: &Node<Ipc>,
+        name: &str,
+        shape: &ChannelShape,
+    ) -> Result<Self, TransportError> {
         let (data, events) = open_services::<T, H>(node, name, shape)?;
         let port_err = |port, e: &dyn Debug| TransportError::Port {
             service: name.to_owned(),
@@ -220,8 +261,15 @@ where
             .buffer_size(shape.subscriber_buffer.max(shape.history))
             .create()
             .map_err(|e| port_err("subscriber", &e))?;
-        let listener = events.listener_builder().create().map_err(|e| port_err("listener", &e))?;
-        Ok(Self { name: name.to_owned(), subscriber, listener })
+        let listener = events
+            .listener_builder()
+            .create()
+            .map_err(|e| port_err("listener", &e))?;
+        Ok(Self {
+            name: name.to_owned(),
+            subscriber,
+            listener,
+        })
     }
 
     /// The event listener to attach to a [`WaitSet`].
@@ -232,7 +280,10 @@ where
     /// Clears pending wake-ups, then hands every available sample to `on_sample` in arrival
     /// order. Returns how many samples were handled.
     pub fn drain(&self, mut on_sample: impl FnMut(&H, &[T])) -> Result<usize, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
+        let recv_err = |e: &dyn Debug| TransportError::Receive {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
         self.listener.try_wait(|_| {}).map_err(|e| recv_err(&e))?;
         let mut n = 0;
         while let Some(sample) = self.subscriber.receive().map_err(|e| recv_err(&e))? {
@@ -248,8 +299,13 @@ where
         timeout: Duration,
         on_sample: impl FnMut(&H, &[T]),
     ) -> Result<usize, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
-        self.listener.timed_wait(|_| {}, timeout).map_err(|e| recv_err(&e))?;
+        let recv_err = |e: &dyn Debug| TransportError::Receive {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
+        self.listener
+            .timed_wait(|_| {}, timeout)
+            .map_err(|e| recv_err(&e))?;
         self.drain(on_sample)
     }
 }
@@ -265,10 +321,18 @@ fn open_value_services<T: Debug + Copy + ZeroCopySend + 'static>(
     node: &Node<Ipc>,
     name: &str,
     shape: &ChannelShape,
-) -> Result<(iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>, EventService), TransportError>
-{
+) -> Result<
+    (
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>,
+        EventService,
+    ),
+    TransportError,
+> {
     let sn = service_name(name)?;
-    let open_err = |e: &dyn Debug| TransportError::Open { service: name.to_owned(), reason: format!("{e:?}") };
+    let open_err = |e: &dyn Debug| TransportError::Open {
+        service: name.to_owned(),
+        reason: format!("{e:?}"),
+    };
     let data = node
         .service_builder(&sn)
         .publish_subscribe::<T>()
@@ -289,22 +353,39 @@ fn open_value_services<T: Debug + Copy + ZeroCopySend + 'static>(
 }
 
 impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
-    pub fn open(node: &Node<Ipc>, name: &str, shape: &ChannelShape) -> Result<Self, TransportError> {
+    pub fn open(
+        node: &Node<Ipc>,
+        name: &str,
+        shape: &ChannelShape,
+    ) -> Result<Self, TransportError> {
         let (data, events) = open_value_services::<T>(node, name, shape)?;
-        let port_err =
-            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let port_err = |port, e: &dyn Debug| TransportError::Port {
+            service: name.to_owned(),
+            port,
+            reason: format!("{e:?}"),
+        };
         let publisher = data
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(|e| port_err("publisher", &e))?;
-        let notifier = events.notifier_builder().create().map_err(|e| port_err("notifier", &e))?;
-        Ok(Self { name: name.to_owned(), publisher, notifier })
+        let notifier = events
+            .notifier_builder()
+            .create()
+            .map_err(|e| port_err("notifier", &e))?;
+        Ok(Self {
+            name: name.to_owned(),
+            publisher,
+            notifier,
+        })
     }
 
     /// Sends a copy of `value` and wakes the subscribers; a full subscriber misses it.
     pub fn send(&self, value: T) -> Result<usize, TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
+        let send_err = |e: &dyn Debug| TransportError::Send {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
         let delivered = self.publisher.send_copy(value).map_err(|e| send_err(&e))?;
         self.notifier.notify().map_err(|e| send_err(&e))?;
         Ok(delivered)
@@ -312,8 +393,13 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
 
     /// Connects new subscribers and hands them the history; call it on a timer.
     pub fn update_connections(&self) -> Result<(), TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
-        self.publisher.update_connections().map_err(|e| send_err(&e))?;
+        let send_err = |e: &dyn Debug| TransportError::Send {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
+        self.publisher
+            .update_connections()
+            .map_err(|e| send_err(&e))?;
         self.notifier.notify().map_err(|e| send_err(&e))?;
         Ok(())
     }
@@ -327,17 +413,31 @@ pub struct ValueSubscriber<T: Debug + Copy + ZeroCopySend + 'static> {
 }
 
 impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
-    pub fn open(node: &Node<Ipc>, name: &str, shape: &ChannelShape) -> Result<Self, TransportError> {
+    pub fn open(
+        node: &Node<Ipc>,
+        name: &str,
+        shape: &ChannelShape,
+    ) -> Result<Self, TransportError> {
         let (data, events) = open_value_services::<T>(node, name, shape)?;
-        let port_err =
-            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let port_err = |port, e: &dyn Debug| TransportError::Port {
+            service: name.to_owned(),
+            port,
+            reason: format!("{e:?}"),
+        };
         let subscriber = data
             .subscriber_builder()
             .buffer_size(shape.subscriber_buffer.max(shape.history))
             .create()
             .map_err(|e| port_err("subscriber", &e))?;
-        let listener = events.listener_builder().create().map_err(|e| port_err("listener", &e))?;
-        Ok(Self { name: name.to_owned(), subscriber, listener })
+        let listener = events
+            .listener_builder()
+            .create()
+            .map_err(|e| port_err("listener", &e))?;
+        Ok(Self {
+            name: name.to_owned(),
+            subscriber,
+            listener,
+        })
     }
 
     /// The event listener to attach to a [`WaitSet`].
@@ -347,7 +447,10 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
 
     /// Clears pending wake-ups and returns every available message in arrival order.
     pub fn drain(&self) -> Result<Vec<T>, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
+        let recv_err = |e: &dyn Debug| TransportError::Receive {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
         self.listener.try_wait(|_| {}).map_err(|e| recv_err(&e))?;
         let mut values = Vec::new();
         while let Some(sample) = self.subscriber.receive().map_err(|e| recv_err(&e))? {
@@ -358,8 +461,13 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
 
     /// Blocks up to `timeout` for a wake-up, then drains.
     pub fn wait_and_drain(&self, timeout: Duration) -> Result<Vec<T>, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
-        self.listener.timed_wait(|_| {}, timeout).map_err(|e| recv_err(&e))?;
+        let recv_err = |e: &dyn Debug| TransportError::Receive {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
+        self.listener
+            .timed_wait(|_| {}, timeout)
+            .map_err(|e| recv_err(&e))?;
         self.drain()
     }
 }
@@ -377,7 +485,10 @@ where
     Q: Debug + Default + Copy + ZeroCopySend + 'static,
     R: Debug + Default + Copy + ZeroCopySend + 'static,
 {
-    let open_err = |e: &dyn Debug| TransportError::Open { service: name.to_owned(), reason: format!("{e:?}") };
+    let open_err = |e: &dyn Debug| TransportError::Open {
+        service: name.to_owned(),
+        reason: format!("{e:?}"),
+    };
     let rpc = node
         .service_builder(&service_name(name)?)
         .request_response::<[u8], [u8]>()
@@ -415,19 +526,38 @@ where
     Q: Debug + Default + Copy + ZeroCopySend + 'static,
     R: Debug + Default + Copy + ZeroCopySend + 'static,
 {
-    pub fn open(node: &Node<Ipc>, name: &str, max_clients: usize, max_len: usize) -> Result<Self, TransportError> {
+    pub fn open(
+        node: &Node<Ipc>,
+        name: &str,
+        max_clients: usize,
+        max_len: usize,
+    ) -> Result<Self, TransportError> {
         let (rpc, requests, responses) = open_rpc_services::<Q, R>(node, name, max_clients)?;
-        let port_err =
-            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let port_err = |port, e: &dyn Debug| TransportError::Port {
+            service: name.to_owned(),
+            port,
+            reason: format!("{e:?}"),
+        };
         let server = rpc
             .server_builder()
             .initial_max_slice_len(max_len)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(|e| port_err("server", &e))?;
-        let listener = requests.listener_builder().create().map_err(|e| port_err("listener", &e))?;
-        let notifier = responses.notifier_builder().create().map_err(|e| port_err("notifier", &e))?;
-        Ok(Self { name: name.to_owned(), server, listener, notifier })
+        let listener = requests
+            .listener_builder()
+            .create()
+            .map_err(|e| port_err("listener", &e))?;
+        let notifier = responses
+            .notifier_builder()
+            .create()
+            .map_err(|e| port_err("notifier", &e))?;
+        Ok(Self {
+            name: name.to_owned(),
+            server,
+            listener,
+            notifier,
+        })
     }
 
     /// The request wake-up listener to attach to a [`WaitSet`].
@@ -437,15 +567,24 @@ where
 
     /// Answers every pending request with `handler(header, body) -> (header, body)`, then wakes
     /// the clients once. Returns how many requests were answered.
-    pub fn serve(&self, mut handler: impl FnMut(&Q, &[u8]) -> (R, Vec<u8>)) -> Result<usize, TransportError> {
-        let err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
+    pub fn serve(
+        &self,
+        mut handler: impl FnMut(&Q, &[u8]) -> (R, Vec<u8>),
+    ) -> Result<usize, TransportError> {
+        let err = |e: &dyn Debug| TransportError::Receive {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
         self.listener.try_wait(|_| {}).map_err(|e| err(&e))?;
         let mut n = 0;
         while let Some(request) = self.server.receive().map_err(|e| err(&e))? {
             let (header, body) = handler(request.user_header(), request.payload());
             let mut response = request.loan_slice_uninit(body.len()).map_err(|e| err(&e))?;
             *response.user_header_mut() = header;
-            response.write_from_slice(&body).send().map_err(|e| err(&e))?;
+            response
+                .write_from_slice(&body)
+                .send()
+                .map_err(|e| err(&e))?;
             n += 1;
         }
         if n > 0 {
@@ -472,29 +611,65 @@ where
     Q: Debug + Default + Copy + ZeroCopySend + 'static,
     R: Debug + Default + Copy + ZeroCopySend + 'static,
 {
-    pub fn open(node: &Node<Ipc>, name: &str, max_clients: usize, max_len: usize) -> Result<Self, TransportError> {
+    pub fn open(
+        node: &Node<Ipc>,
+        name: &str,
+        max_clients: usize,
+        max_len: usize,
+    ) -> Result<Self, TransportError> {
         let (rpc, requests, responses) = open_rpc_services::<Q, R>(node, name, max_clients)?;
-        let port_err =
-            |port, e: &dyn Debug| TransportError::Port { service: name.to_owned(), port, reason: format!("{e:?}") };
+        let port_err = |port, e: &dyn Debug| TransportError::Port {
+            service: name.to_owned(),
+            port,
+            reason: format!("{e:?}"),
+        };
         let client = rpc
             .client_builder()
             .initial_max_slice_len(max_len)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(|e| port_err("client", &e))?;
-        let notifier = requests.notifier_builder().create().map_err(|e| port_err("notifier", &e))?;
-        let listener = responses.listener_builder().create().map_err(|e| port_err("listener", &e))?;
-        Ok(Self { name: name.to_owned(), client, notifier, listener })
+        let notifier = requests
+            .notifier_builder()
+            .create()
+            .map_err(|e| port_err("notifier", &e))?;
+        let listener = responses
+            .listener_builder()
+            .create()
+            .map_err(|e| port_err("listener", &e))?;
+        Ok(Self {
+            name: name.to_owned(),
+            client,
+            notifier,
+            listener,
+        })
     }
 
     /// Sends one request and waits up to `timeout` for its response. A server that does not
     /// answer in time is a [`TransportError::Receive`] naming the timeout.
-    pub fn call(&self, header: Q, body: &[u8], timeout: Duration) -> Result<(R, Vec<u8>), TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send { service: self.name.clone(), reason: format!("{e:?}") };
-        let recv_err = |e: &dyn Debug| TransportError::Receive { service: self.name.clone(), reason: format!("{e:?}") };
-        let mut request = self.client.loan_slice_uninit(body.len()).map_err(|e| send_err(&e))?;
+    pub fn call(
+        &self,
+        header: Q,
+        body: &[u8],
+        timeout: Duration,
+    ) -> Result<(R, Vec<u8>), TransportError> {
+        let send_err = |e: &dyn Debug| TransportError::Send {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
+        let recv_err = |e: &dyn Debug| TransportError::Receive {
+            service: self.name.clone(),
+            reason: format!("{e:?}"),
+        };
+        let mut request = self
+            .client
+            .loan_slice_uninit(body.len())
+            .map_err(|e| send_err(&e))?;
         *request.user_header_mut() = header;
-        let pending = request.write_from_slice(body).send().map_err(|e| send_err(&e))?;
+        let pending = request
+            .write_from_slice(body)
+            .send()
+            .map_err(|e| send_err(&e))?;
         self.notifier.notify().map_err(|e| send_err(&e))?;
         let deadline = std::time::Instant::now() + timeout;
         loop {
@@ -505,7 +680,9 @@ where
             if left.is_zero() {
                 return Err(recv_err(&format!("no response within {timeout:?}")));
             }
-            self.listener.timed_wait(|_| {}, left).map_err(|e| recv_err(&e))?;
+            self.listener
+                .timed_wait(|_| {}, left)
+                .map_err(|e| recv_err(&e))?;
         }
     }
 }

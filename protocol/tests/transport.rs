@@ -3,8 +3,10 @@
 
 use std::time::Duration;
 
+use ::protocol::transport::{
+    open_node, Backpressure, ChannelShape, SlicePublisher, SliceSubscriber, TransportError,
+};
 use iceoryx2::prelude::*;
-use ::protocol::transport::{open_node, Backpressure, ChannelShape, SlicePublisher, SliceSubscriber, TransportError};
 
 #[derive(Debug, Default, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("TestHeader")]
@@ -15,12 +17,20 @@ struct TestHeader {
 }
 
 fn unique(name: &str) -> String {
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
     format!("asi-test/{}/{nanos}/{name}", std::process::id())
 }
 
-const SHAPE: ChannelShape =
-    ChannelShape { max_slice_len: 64, subscriber_buffer: 16, history: 0, max_publishers: 2, max_subscribers: 2 };
+const SHAPE: ChannelShape = ChannelShape {
+    max_slice_len: 64,
+    subscriber_buffer: 16,
+    history: 0,
+    max_publishers: 2,
+    max_subscribers: 2,
+};
 
 #[test]
 fn slices_and_headers_arrive_intact_and_in_order() {
@@ -28,11 +38,23 @@ fn slices_and_headers_arrive_intact_and_in_order() {
     let node_a = open_node("test-pub").unwrap();
     let node_b = open_node("test-sub").unwrap();
     let subscriber = SliceSubscriber::<f32, TestHeader>::open(&node_b, &service, &SHAPE).unwrap();
-    let publisher = SlicePublisher::<f32, TestHeader>::open(&node_a, &service, &SHAPE, Backpressure::Discard).unwrap();
+    let publisher =
+        SlicePublisher::<f32, TestHeader>::open(&node_a, &service, &SHAPE, Backpressure::Discard)
+            .unwrap();
 
     for chunk in 0..5u64 {
-        let payload: Vec<f32> = (0..(chunk as usize + 1) * 3).map(|i| i as f32 + chunk as f32 * 0.5).collect();
-        let delivered = publisher.send(TestHeader { chunk, n: payload.len() as u32 }, &payload).unwrap();
+        let payload: Vec<f32> = (0..(chunk as usize + 1) * 3)
+            .map(|i| i as f32 + chunk as f32 * 0.5)
+            .collect();
+        let delivered = publisher
+            .send(
+                TestHeader {
+                    chunk,
+                    n: payload.len() as u32,
+                },
+                &payload,
+            )
+            .unwrap();
         assert_eq!(delivered, 1);
     }
     let mut seen = Vec::new();
@@ -50,9 +72,23 @@ fn slices_and_headers_arrive_intact_and_in_order() {
 fn a_payload_longer_than_the_channel_is_an_error_not_a_panic() {
     let service = unique("too-long");
     let node = open_node("test-long").unwrap();
-    let publisher = SlicePublisher::<f32, TestHeader>::open(&node, &service, &SHAPE, Backpressure::Discard).unwrap();
-    let err = publisher.send(TestHeader::default(), &[0.0; 65]).unwrap_err();
-    assert!(matches!(err, TransportError::TooLong { len: 65, max: 64, .. }), "{err}");
+    let publisher =
+        SlicePublisher::<f32, TestHeader>::open(&node, &service, &SHAPE, Backpressure::Discard)
+            .unwrap();
+    let err = publisher
+        .send(TestHeader::default(), &[0.0; 65])
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            TransportError::TooLong {
+                len: 65,
+                max: 64,
+                ..
+            }
+        ),
+        "{err}"
+    );
 }
 
 #[test]
@@ -60,7 +96,9 @@ fn a_full_subscriber_never_blocks_a_discarding_publisher() {
     let service = unique("full");
     let node = open_node("test-full").unwrap();
     let _subscriber = SliceSubscriber::<f32, TestHeader>::open(&node, &service, &SHAPE).unwrap();
-    let publisher = SlicePublisher::<f32, TestHeader>::open(&node, &service, &SHAPE, Backpressure::Discard).unwrap();
+    let publisher =
+        SlicePublisher::<f32, TestHeader>::open(&node, &service, &SHAPE, Backpressure::Discard)
+            .unwrap();
     // Twice the subscriber's buffer, never drained: every send must return.
     for chunk in 0..(2 * SHAPE.subscriber_buffer as u64) {
         publisher.send(TestHeader { chunk, n: 1 }, &[1.0]).unwrap();
@@ -72,7 +110,10 @@ fn fixed_size_values_arrive_and_history_reaches_a_late_subscriber() {
     use ::protocol::transport::{ValuePublisher, ValueSubscriber};
     let service = unique("values");
     let node = open_node("test-values").unwrap();
-    let shape = ChannelShape { history: 1, ..SHAPE };
+    let shape = ChannelShape {
+        history: 1,
+        ..SHAPE
+    };
     let publisher = ValuePublisher::<TestHeader>::open(&node, &service, &shape).unwrap();
     publisher.send(TestHeader { chunk: 7, n: 1 }).unwrap();
     let late = ValueSubscriber::<TestHeader>::open(&node, &service, &shape).unwrap();
@@ -91,14 +132,28 @@ fn a_request_gets_its_own_response_across_nodes() {
     let client_service = service.clone();
     let call = std::thread::spawn(move || {
         let client_node = open_node("test-client").unwrap();
-        let client = RpcClient::<TestHeader, TestHeader>::open(&client_node, &client_service, 4, 64).unwrap();
-        client.call(TestHeader { chunk: 3, n: 2 }, &[1, 2], Duration::from_secs(5))
+        let client =
+            RpcClient::<TestHeader, TestHeader>::open(&client_node, &client_service, 4, 64)
+                .unwrap();
+        client.call(
+            TestHeader { chunk: 3, n: 2 },
+            &[1, 2],
+            Duration::from_secs(5),
+        )
     });
     let deadline = std::time::Instant::now() + Duration::from_secs(5);
     let mut served = 0;
     while served == 0 && std::time::Instant::now() < deadline {
         served = server
-            .serve(|h, body| (TestHeader { chunk: h.chunk * 10, n: body.len() as u32 }, body.iter().rev().copied().collect()))
+            .serve(|h, body| {
+                (
+                    TestHeader {
+                        chunk: h.chunk * 10,
+                        n: body.len() as u32,
+                    },
+                    body.iter().rev().copied().collect(),
+                )
+            })
             .unwrap();
         std::thread::sleep(Duration::from_millis(1));
     }
@@ -113,6 +168,8 @@ fn a_call_without_a_server_times_out_with_an_error() {
     let service = unique("no-server");
     let node = open_node("test-lonely").unwrap();
     let client = RpcClient::<TestHeader, TestHeader>::open(&node, &service, 4, 64).unwrap();
-    let err = client.call(TestHeader::default(), &[0], Duration::from_millis(50)).unwrap_err();
+    let err = client
+        .call(TestHeader::default(), &[0], Duration::from_millis(50))
+        .unwrap_err();
     assert!(err.to_string().contains("no response"), "{err}");
 }
