@@ -9,6 +9,7 @@ mod launcher;
 mod proc;
 mod run;
 mod serial;
+mod tensorboard;
 
 use std::process::ExitCode;
 

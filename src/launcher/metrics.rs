@@ -1,6 +1,7 @@
 //! The launcher's view of the run: the latest value of every metric from every process,
-//! written to `metrics.jsonl` (one object per flush, all values) and `metrics.csv` (headline
-//! columns), and shown as one progress line. Metric names are documented in `docs/METRICS.md`.
+//! written to `metrics.jsonl` (one object per flush, all values), `metrics.csv` (headline
+//! columns) and TensorBoard event files in `tensorboard/` (all values, x axis = env steps), and
+//! shown as one progress line. Metric names are documented in `docs/METRICS.md`.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -11,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use protocol::{Config, MetricsSample, ProcessRole};
 
 use crate::run::RunContext;
+use crate::tensorboard::EventWriter;
 
 /// Headline columns of `metrics.csv`, each the key of a value in the book.
 const CSV_COLUMNS: [&str; 7] = [
@@ -30,6 +32,7 @@ pub struct MetricsBook {
     started: Instant,
     jsonl: BufWriter<File>,
     csv: BufWriter<File>,
+    tensorboard: EventWriter,
     bar: ProgressBar,
     last_plain: Instant,
     rate: RateMeter,
@@ -40,6 +43,7 @@ impl MetricsBook {
         let jsonl = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
         let mut csv = BufWriter::new(File::create(ctx.run_dir.join("metrics.csv"))?);
         writeln!(csv, "wall_secs,env_steps_per_sec,actor_restarts,{}", CSV_COLUMNS.join(","))?;
+        let tensorboard = EventWriter::create(&ctx.run_dir.join("tensorboard"))?;
         let bar = if std::io::stderr().is_terminal() { ProgressBar::new_spinner() } else { ProgressBar::hidden() };
         bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").unwrap_or_else(|_| ProgressStyle::default_spinner()));
         bar.enable_steady_tick(Duration::from_millis(200));
@@ -48,6 +52,7 @@ impl MetricsBook {
             started: Instant::now(),
             jsonl,
             csv,
+            tensorboard,
             bar,
             last_plain: Instant::now(),
             rate: RateMeter::default(),
@@ -108,8 +113,17 @@ impl MetricsBook {
         writeln!(self.jsonl, "{}", serde_json::Value::Object(object))?;
         let columns: Vec<String> = CSV_COLUMNS.iter().map(|k| self.get(k).to_string()).collect();
         writeln!(self.csv, "{wall:.3},{:.1},{restarts},{}", self.rate.per_sec(), columns.join(","))?;
+        let mut scalars: Vec<(&str, f32)> = vec![
+            ("launcher/env_steps_per_sec", self.rate.per_sec() as f32),
+            ("launcher/actor_restarts", restarts as f32),
+        ];
+        scalars.extend(self.values.iter().map(|(key, value)| (key.as_str(), *value as f32)));
+        let unix = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        let step = self.get("learner/ingest/env_steps") as i64;
+        self.tensorboard.add_scalars(step, unix.as_secs_f64(), &scalars)?;
         self.jsonl.flush()?;
         self.csv.flush()?;
+        self.tensorboard.flush()?;
         Ok(())
     }
 
