@@ -12,6 +12,7 @@ pub mod cheetah;
 pub mod coverage;
 pub mod maze;
 pub mod maze_env;
+pub mod pendulum;
 pub mod physics;
 pub mod point;
 pub mod registry;
