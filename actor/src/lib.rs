@@ -7,6 +7,7 @@
 //! - [`episode`]: one episode's stepping: high-level decisions every c steps, low-level actions,
 //!   φ labels, records.
 //! - [`subgoal`]: [`SubgoalSource`], how the high level decides (random warm-up, policy).
+//! - [`eval`]: [`eval::Evaluator`], deterministic evaluation episodes on the test goal.
 //! - [`exploration`]: sampling and noise for both levels, clipping.
 //! - [`networks`]: φ, π_hi, π_lo inference with double-buffered weights.
 //! - [`record`]: writing records into the `[f32]` payload.
@@ -20,6 +21,7 @@ pub mod actor;
 pub mod chunk;
 mod episode;
 pub mod error;
+pub mod eval;
 mod exploration;
 mod networks;
 mod record;
