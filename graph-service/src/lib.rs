@@ -8,19 +8,23 @@
 //! - [`dijkstra`]: shortest paths with path recovery.
 //! - [`frontier`]: frontier choice, routes, SI route queries with the frontier fallback.
 //! - [`counts`]: visit counts n(v) (Eq. 10) and the least-visited candidate.
+//! - [`hess`]: HESS's visit, future-count and potential maps and the explore subgoal (SPEC §6.4).
 //! - [`phi`]: the encoder φ loaded from weights messages; batched re-mapping of the store.
+//! - [`bench`]: synthetic stores and timings for `asi bench graph`.
 //! - [`server`]: [`GraphService::handle`], the request handler.
 //! - [`service`]: [`GraphService`] itself: ingest, weights, rebuild, queries, stats.
 //!
 //! Invariants: bad input (chunks, weights, requests) is refused with a reason and counted,
 //! never a panic, and leaves the state unchanged.
 
+pub mod bench;
 pub mod counts;
 pub mod dijkstra;
 pub mod error;
 pub mod frontier;
 pub mod graph;
 pub mod grid;
+pub mod hess;
 pub mod phi;
 pub mod server;
 pub mod service;
@@ -30,4 +34,5 @@ pub use error::GraphServiceError;
 pub use frontier::{Frontier, NoRoute};
 pub use graph::{LatentGraph, NodeId};
 pub use grid::{CellKey, Grid};
+pub use hess::{ExploreChoice, HessMaps, HessParams};
 pub use service::{GraphService, GraphStats};

@@ -118,6 +118,11 @@ fn build_set(spec: &NetsSpec, seed: u64) -> Result<(VarMap, PolicySet), GraphSer
 }
 
 impl Phi {
+    /// φ from an encoder built elsewhere (benchmarks, tests), at `version`.
+    pub fn new(encoder: Encoder, version: PhiVersion) -> Self {
+        Self { encoder, version }
+    }
+
     /// Version of these weights.
     pub fn version(&self) -> PhiVersion {
         self.version

@@ -7,17 +7,26 @@
 //! computed with another φ version than the graph's is answered all the same (the response
 //! header names the graph's φ version) and counted in `stale_phi_requests`.
 //!
-//! Answers:
+//! Answers (every response header carries the graph version and the φ version of the state
+//! that answered, whatever the status):
 //! - `Stats`: always `Ok`, also before the first graph.
-//! - `FrontierRoute`, `Routes`, `Dump`: `NotReady` with an empty body until a graph is built.
+//! - `FrontierRoute`, `Routes`, `Dump`: `NotReady` until a graph is built, with an `Error` body
+//!   giving the reason (empty graph: no φ weights yet). `FrontierRoute(None)` and
+//!   `RouteAnswer::NoRoute` have no room for a reason in the wire types; they are counted
+//!   (`frontier_not_found`, `routes_not_found`), and the reason (start cell unknown, end cell
+//!   unknown, unreachable, nothing reachable) is [`crate::NoRoute`] from
+//!   [`GraphService::frontier_route`] / [`GraphService::route`]; `asi graph` derives it from a
+//!   dump for its messages.
 //! - `LeastVisited`: answered from the visit counts (which exist before the graph); an empty
 //!   candidate list is `InvalidRequest`.
-//! - `ExploreSubgoal`, `ReportReaching` (HESS novelty/potential maps): not implemented yet;
-//!   `NotReady` with an `Error` body saying so.
+//! - `ExploreSubgoal`: HESS's count-based subgoal ([`crate::hess`]); `NotReady` with a reason
+//!   while no state is stored. Needs no graph.
+//! - `ReportReaching`: adds the samples to the potential map, answers `Ack`; a negative error
+//!   refuses the whole batch (`InvalidRequest`, nothing added).
 
 use protocol::graph::{
     DumpNode, FrontierRoute, GraphDump, GraphRequestHeader, GraphResponseHeader,
-    GraphStats as WireStats, GraphStatus, RouteQuery,
+    GraphStats as WireStats, GraphStatus, ReachSample, RouteAnswer, RouteQuery,
 };
 use protocol::{GraphRequest, GraphResponse, LatentPoint, ProtocolError};
 
@@ -56,11 +65,13 @@ impl From<ProtocolError> for Refusal {
 /// What a request is answered with, before encoding.
 enum Answer {
     Ok(GraphResponse),
-    /// No graph yet: empty body.
-    NotReady,
-    /// Not supported by this build: `NotReady` with a reason.
-    Unsupported(String),
+    /// Not answerable yet (no graph, no stored state): `NotReady` with the reason.
+    NotReady(String),
 }
+
+/// Why graph queries are `NotReady` before the first graph.
+const NO_GRAPH_YET: &str = "empty graph: no graph has been built yet (the first is built when \
+    the learner's first φ weights arrive)";
 
 impl GraphService {
     /// Answers one request (see the module doc of [`crate::server`]). Never panics.
@@ -76,8 +87,7 @@ impl GraphService {
         });
         let (status, body) = match answer {
             Ok(Answer::Ok(response)) => (GraphStatus::Ok, Some(response)),
-            Ok(Answer::NotReady) => (GraphStatus::NotReady, None),
-            Ok(Answer::Unsupported(message)) => (
+            Ok(Answer::NotReady(message)) => (
                 GraphStatus::NotReady,
                 Some(GraphResponse::Error { message }),
             ),
@@ -172,14 +182,34 @@ impl GraphService {
             GraphRequest::Dump => self
                 .graph
                 .as_ref()
-                .map_or(Answer::NotReady, |g| self.dump(g)),
-            GraphRequest::ExploreSubgoal { .. } | GraphRequest::ReportReaching { .. } => {
-                Answer::Unsupported(format!(
-                    "{:?} (HESS novelty/potential maps) is not supported by this graph-service yet",
-                    request.kind()
-                ))
-            }
+                .map_or(Answer::NotReady(NO_GRAPH_YET.to_owned()), |g| self.dump(g)),
+            GraphRequest::ExploreSubgoal { from, episode } => self.answer_explore(from, episode),
+            GraphRequest::ReportReaching { samples } => self.answer_report(&samples)?,
         })
+    }
+
+    fn answer_explore(&mut self, from: LatentPoint, episode: u64) -> Answer {
+        match self.explore(from, episode) {
+            Some(choice) => Answer::Ok(GraphResponse::ExploreSubgoal {
+                subgoal: choice.subgoal,
+                candidate: choice.candidate,
+            }),
+            None => Answer::NotReady(
+                "no stored states yet: explore subgoals are drawn from stored trajectories"
+                    .to_owned(),
+            ),
+        }
+    }
+
+    fn answer_report(&mut self, samples: &[ReachSample]) -> Result<Answer, Refusal> {
+        match self.hess.report(samples) {
+            Ok(()) => Ok(Answer::Ok(GraphResponse::Ack)),
+            Err(bad) => Err(Refusal::invalid(format!(
+                "samples.error[{}] is {}; a reaching error is a distance (≥ 0); no sample of \
+                 the batch was added",
+                bad.index, bad.error
+            ))),
+        }
     }
 
     fn wire_stats(&self) -> WireStats {
@@ -195,9 +225,10 @@ impl GraphService {
 
     fn answer_frontier(&mut self, from: LatentPoint) -> Answer {
         let Some(graph) = self.graph.as_ref() else {
-            return Answer::NotReady;
+            return Answer::NotReady(NO_GRAPH_YET.to_owned());
         };
         let found = frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng).ok();
+        self.stats.frontier_not_found += u64::from(found.is_none());
         let answer = found.and_then(|f| {
             Some(FrontierRoute {
                 frontier: graph.position(f.node)?,
@@ -210,13 +241,17 @@ impl GraphService {
 
     fn answer_routes(&mut self, queries: &[RouteQuery]) -> Answer {
         let Some(graph) = self.graph.as_ref() else {
-            return Answer::NotReady;
+            return Answer::NotReady(NO_GRAPH_YET.to_owned());
         };
         let fraction = self.frontier_fraction;
-        let answers = queries
+        let answers: Vec<RouteAnswer> = queries
             .iter()
             .map(|q| frontier::answer_route_query(graph, q, fraction, &mut self.rng))
             .collect();
+        self.stats.routes_not_found += answers
+            .iter()
+            .filter(|a| **a == RouteAnswer::NoRoute)
+            .count() as u64;
         Answer::Ok(GraphResponse::Routes(answers))
     }
 

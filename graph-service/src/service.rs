@@ -8,6 +8,10 @@
 //! re-maps every stored state and rebuilds the graph; between φ versions the graph is static
 //! (as the released code), so new data enters it at the next φ round or on [`GraphService::rebuild`].
 //!
+//! HESS's maps ([`crate::hess`]) count every stored state on arrival, recompute their future
+//! counts every `future_count_interval_episodes` closed episodes and after every φ re-map, and
+//! accumulate the potential from reach reports.
+//!
 //! Invariants: a refused chunk or weights message changes nothing but a counter; visit counts
 //! always describe the stored states under the current latent mapping.
 
@@ -26,6 +30,7 @@ use crate::error::GraphServiceError;
 use crate::frontier::{self, Frontier, NoRoute};
 use crate::graph::{GraphBuilder, LatentGraph, NodeId};
 use crate::grid::Grid;
+use crate::hess::{ExploreChoice, HessMaps, HessParams};
 use crate::phi::{Phi, PhiLoader};
 use crate::store::{ChunkStates, TrajectoryStore};
 
@@ -64,6 +69,18 @@ pub struct GraphStats {
     pub invalid_requests: u64,
     /// Requests whose φ version differed from the graph's (answered all the same).
     pub stale_phi_requests: u64,
+    /// Cells of the HESS count grid with at least one visit.
+    pub hess_visited_cells: u64,
+    /// HESS future-count recomputations so far.
+    pub future_count_recomputes: u64,
+    /// Reach samples added to the potential map.
+    pub reach_samples: u64,
+    /// Explore subgoals answered.
+    pub explore_answers: u64,
+    /// Frontier requests answered without a frontier (start cell unknown or nothing reachable).
+    pub frontier_not_found: u64,
+    /// Route queries answered `NoRoute`.
+    pub routes_not_found: u64,
 }
 
 /// The graph-service state machine.
@@ -78,6 +95,7 @@ pub struct GraphService {
     phi: Option<Phi>,
     store: TrajectoryStore,
     pub(crate) counts: VisitCounts,
+    pub(crate) hess: HessMaps,
     pub(crate) graph: Option<LatentGraph>,
     pub(crate) graph_version: u64,
     pub(crate) rng: Pcg64,
@@ -120,6 +138,7 @@ impl GraphService {
             phi: None,
             store: TrajectoryStore::new(dims.obs_dim, graph.max_stored_steps),
             counts: VisitCounts::new(grid),
+            hess: HessMaps::new(HessParams::from_config(config)),
             graph: None,
             graph_version: 0,
             rng: Pcg64::seed_from_u64(seed),
@@ -138,9 +157,14 @@ impl GraphService {
         match self.chunk_states(header, payload) {
             Ok(chunk) => {
                 let n_records = u64::from(header.n_steps);
+                let episode_end = chunk.episode_end;
                 self.counts.add(&chunk.latents);
+                self.hess.count(&chunk.latents);
                 let evicted = self.store.append(chunk);
                 self.counts.remove(&evicted);
+                if episode_end {
+                    self.hess.episode_stored(&self.store);
+                }
                 self.stats.chunks += 1;
                 *self
                     .stats
@@ -237,6 +261,7 @@ impl GraphService {
         self.phi = Some(phi);
         self.recount();
         self.rebuild();
+        self.hess.recompute_future(&self.store);
         Ok(())
     }
 
@@ -292,6 +317,19 @@ impl GraphService {
         self.counts.at(point)
     }
 
+    /// HESS's count-based explore subgoal near `from` for training episode `episode`
+    /// ([`HessMaps::explore`], drawing with the service's RNG); `None` while the store is empty.
+    pub fn explore(&mut self, from: LatentPoint, episode: u64) -> Option<ExploreChoice> {
+        let choice = self.hess.explore(&self.store, from, episode, &mut self.rng);
+        self.stats.explore_answers += u64::from(choice.is_some());
+        choice
+    }
+
+    /// HESS's maps (visits, future counts, potential).
+    pub fn hess(&self) -> &HessMaps {
+        &self.hess
+    }
+
     /// Counters and sizes.
     pub fn stats(&self) -> GraphStats {
         let graph = self.graph.as_ref();
@@ -306,6 +344,9 @@ impl GraphService {
             unmapped_states: graph.map_or(0, LatentGraph::n_unmapped_states),
             graph_version: self.graph_version,
             phi_version: self.phi_version(),
+            hess_visited_cells: self.hess.n_visited_cells() as u64,
+            future_count_recomputes: self.hess.n_future_recomputes(),
+            reach_samples: self.hess.n_reach_samples(),
             ..self.stats.clone()
         }
     }

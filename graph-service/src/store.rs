@@ -22,6 +22,7 @@
 use std::collections::{HashMap, VecDeque};
 
 use protocol::{ActorId, EpisodeId, LatentPoint};
+use rand::Rng;
 
 /// A validated chunk, ready to append.
 #[derive(Debug, Clone, PartialEq)]
@@ -78,6 +79,12 @@ impl Trajectory {
     /// Whether no state is stored.
     pub fn is_empty(&self) -> bool {
         self.latents.is_empty()
+    }
+
+    /// Whether the trajectory reached its episode's end (`EPISODE_END`); a trajectory cut
+    /// short by a lost chunk, or still receiving chunks, is not closed.
+    pub fn is_closed(&self) -> bool {
+        self.closed
     }
 
     /// Whether `chunk` continues this trajectory.
@@ -142,6 +149,32 @@ impl TrajectoryStore {
     /// Stored trajectories, oldest first.
     pub fn trajectories(&self) -> impl Iterator<Item = &Trajectory> {
         self.trajectories.iter()
+    }
+
+    /// `n` latent points drawn uniformly, with replacement, from every stored state (empty
+    /// when the store is). `O(n_trajectories + n log n_trajectories)`.
+    pub fn sample_latents<R: Rng>(&self, n: usize, rng: &mut R) -> Vec<LatentPoint> {
+        if self.n_states == 0 {
+            return Vec::new();
+        }
+        // ends[i] = states in trajectories 0..=i.
+        let ends: Vec<u64> = self
+            .trajectories
+            .iter()
+            .scan(0u64, |total, t| {
+                *total += t.len() as u64;
+                Some(*total)
+            })
+            .collect();
+        (0..n)
+            .filter_map(|_| {
+                let flat = rng.random_range(0..self.n_states);
+                let i = ends.partition_point(|&end| end <= flat);
+                let start = if i == 0 { 0 } else { ends[i - 1] };
+                let t = self.trajectories.get(i)?;
+                t.latents.get(usize::try_from(flat - start).ok()?).copied()
+            })
+            .collect()
     }
 
     /// Appends a validated chunk (`obs.len() == latents.len() × obs_dim`, checked by the
@@ -291,6 +324,25 @@ mod tests {
 
     fn xs(store: &TrajectoryStore) -> Vec<Vec<f32>> {
         store.trajectories().map(|t| t.obs().to_vec()).collect()
+    }
+
+    #[test]
+    fn samples_are_stored_states_and_cover_every_one() {
+        use rand::SeedableRng;
+        let mut store = TrajectoryStore::new(1, 100);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(1);
+        assert!(store.sample_latents(5, &mut rng).is_empty());
+        store.append(chunk(0, 1, 0, 0, &[0.0, 1.0, 2.0], true));
+        store.append(chunk(0, 2, 0, 0, &[3.0], true));
+        store.append(chunk(1, 1, 0, 0, &[4.0, 5.0], false));
+        let samples = store.sample_latents(3000, &mut rng);
+        assert_eq!(samples.len(), 3000);
+        for value in 0..6 {
+            let hits = samples.iter().filter(|p| p[0] == value as f32).count();
+            // Uniform over 6 states: 500 expected; 5 standard deviations is about ±100.
+            assert!((400..=600).contains(&hits), "state {value}: {hits} hits");
+        }
+        assert!(samples.iter().all(|p| (0.0..=5.0).contains(&p[0])));
     }
 
     #[test]

@@ -97,7 +97,14 @@ fn graph_requests_before_the_first_graph_are_not_ready() {
     for request in requests {
         let (response, body) = ask(&mut service, &request);
         assert_eq!(status(&response), GraphStatus::NotReady, "{request:?}");
-        assert_eq!(body, None);
+        assert_eq!(
+            (response.graph_version, response.phi_version),
+            (0, PhiVersion(0))
+        );
+        let Some(GraphResponse::Error { message }) = body else {
+            panic!("{body:?}")
+        };
+        assert!(message.contains("empty graph"), "{message}");
     }
 }
 
@@ -380,28 +387,155 @@ fn dump_lists_nodes_with_visits_and_edges() {
 }
 
 #[test]
-fn hess_requests_say_they_are_not_supported_yet() {
+fn explore_subgoals_come_from_stored_states_near_the_query_point() {
     let mut service = plus_service();
-    let requests = [
-        GraphRequest::ExploreSubgoal {
-            from: at(0, 0),
-            episode: 500,
-        },
-        GraphRequest::ReportReaching {
-            samples: vec![ReachSample {
-                subgoal: at(0, 0),
-                error: 1.0,
-            }],
-        },
-    ];
-    for request in requests {
-        let (response, body) = ask(&mut service, &request);
-        assert_eq!(status(&response), GraphStatus::NotReady);
-        let Some(GraphResponse::Error { message }) = body else {
+    // Count cells are 3 wide: every stored state within 20 of (0.5, 0.5) except the island
+    // ((10.5, 10.5) is 14.1 away, (11.5, 10.5) is 15.0 away: also within).
+    let stored: Vec<[f32; 2]> = (0..=4)
+        .flat_map(|i| [at(i, 0), at(-i, 0), at(0, i), at(0, -i)])
+        .chain([at(10, 10), at(11, 10)])
+        .collect();
+    for episode in [0, 100, 500] {
+        let (response, body) = ask(
+            &mut service,
+            &GraphRequest::ExploreSubgoal {
+                from: at(0, 0),
+                episode,
+            },
+        );
+        assert_eq!(status(&response), GraphStatus::Ok);
+        assert_eq!(
+            (response.graph_version, response.phi_version),
+            (1, PhiVersion(1))
+        );
+        let Some(GraphResponse::ExploreSubgoal { subgoal, candidate }) = body else {
             panic!("{body:?}")
         };
-        assert!(message.contains("not supported"), "{message}");
+        assert!(stored.contains(&candidate), "{candidate:?}");
+        assert_ne!(
+            candidate,
+            at(0, 0),
+            "the query point itself is no candidate"
+        );
+        let pushed =
+            ((subgoal[0] - candidate[0]).powi(2) + (subgoal[1] - candidate[1]).powi(2)).sqrt();
+        if episode > config().exploration.potential_start_episode {
+            assert!((pushed - 5.0).abs() < 1e-4, "pushed by {pushed}");
+        } else {
+            assert_eq!(subgoal, candidate);
+        }
     }
+    assert_eq!(service.stats().explore_answers, 3);
+}
+
+#[test]
+fn reported_failures_steer_late_explore_subgoals_away() {
+    let config = config();
+    let mut service = service(&config);
+    // Two stored states 3 units either side of the origin, in count cells (1, 0) and (−1, 0)
+    // (cells of 3). Equal future counts: without potential the first draw of the lower
+    // score wins, so report a large failure at one of them and check the other is chosen.
+    ingest_episode(&mut service, 0, 0, &[[3.5, 0.5], [-2.5, 0.5]]);
+    let report = GraphRequest::ReportReaching {
+        samples: vec![ReachSample {
+            subgoal: [4.0, 1.0],
+            error: 50.0,
+        }],
+    };
+    let (response, body) = ask(&mut service, &report);
+    assert_eq!(
+        (status(&response), body),
+        (GraphStatus::Ok, Some(GraphResponse::Ack))
+    );
+    for _ in 0..10 {
+        let (_, body) = ask(
+            &mut service,
+            &GraphRequest::ExploreSubgoal {
+                from: [0.5, 0.5],
+                episode: 1000,
+            },
+        );
+        let Some(GraphResponse::ExploreSubgoal { candidate, subgoal }) = body else {
+            panic!("{body:?}")
+        };
+        assert_eq!(candidate, [-2.5, 0.5]);
+        assert_eq!(subgoal, [-7.5, 0.5], "pushed 5 further from (0.5, 0.5)");
+    }
+    assert!((service.hess().potential_at([3.0, 0.0]) - 50.0).abs() < 1e-12);
+}
+
+#[test]
+fn explore_before_any_stored_state_is_not_ready_with_a_reason() {
+    let config = config();
+    let mut service = service(&config);
+    let (response, body) = ask(
+        &mut service,
+        &GraphRequest::ExploreSubgoal {
+            from: [0.0, 0.0],
+            episode: 1,
+        },
+    );
+    assert_eq!(status(&response), GraphStatus::NotReady);
+    let Some(GraphResponse::Error { message }) = body else {
+        panic!("{body:?}")
+    };
+    assert!(message.contains("no stored states"), "{message}");
+}
+
+#[test]
+fn negative_or_non_finite_reaching_errors_are_refused_and_add_nothing() {
+    let mut service = plus_service();
+    let bad = [
+        (-1.0, "distance"),
+        (f32::NAN, "non-finite"),
+        (f32::INFINITY, "non-finite"),
+    ];
+    for (error, words) in bad {
+        let request = GraphRequest::ReportReaching {
+            samples: vec![
+                ReachSample {
+                    subgoal: at(0, 0),
+                    error: 1.0,
+                },
+                ReachSample {
+                    subgoal: at(0, 0),
+                    error,
+                },
+            ],
+        };
+        let header = GraphRequestHeader::new(3, GraphRequestKind::ReportReaching, PhiVersion(1));
+        assert_error(
+            &mut service,
+            &header,
+            &protocol::encode(&request).unwrap(),
+            GraphStatus::InvalidRequest,
+            words,
+        );
+    }
+    assert_eq!(service.hess().potential_at(at(0, 0)), 0.0);
+    assert_eq!(service.stats().reach_samples, 0);
+    stats_still_work(&mut service);
+}
+
+#[test]
+fn requests_without_a_route_are_counted() {
+    let mut service = plus_service();
+    ask(
+        &mut service,
+        &GraphRequest::FrontierRoute { from: at(30, 30) },
+    );
+    ask(
+        &mut service,
+        &GraphRequest::Routes {
+            queries: vec![RouteQuery {
+                start: at(0, 0),
+                end: at(10, 10),
+                fallback_origin: None,
+            }],
+        },
+    );
+    let stats = service.stats();
+    assert_eq!((stats.frontier_not_found, stats.routes_not_found), (1, 1));
 }
 
 #[test]

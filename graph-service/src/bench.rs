@@ -1,0 +1,268 @@
+//! Speed measurements of the graph-service's heavy steps on synthetic data, for `asi bench
+//! graph` (which prints them and runs the scipy comparison). Nothing here is used at run time.
+//!
+//! Synthetic store: episodes of `episode_len` steps (+1 final state) in an `obs_dim`-D
+//! observation space; each episode starts at a uniform point of a square xy region and random
+//! walks (uniform steps of ±`XY_STEP` in x and y, ±`JOINT_STEP` in the other dimensions). A
+//! random-init φ maps such walks into a handful of cells, which would make the graph trivial,
+//! so the graph is built from the walks' xy (what a trained φ resembles: the region spans about
+//! `REGION_CELLS`² cells of the default side 2, more than the default cap of 5,000 nodes). The
+//! φ re-mapping is timed with the real encoder of the default config on the same observations.
+//!
+//! A rebuild is what [`crate::GraphService::load_weights`] does: re-map every stored state
+//! (batched candle inference, one call per trajectory), rebuild the graph, recount the visit
+//! counts and recompute HESS's future counts. The three parts are timed separately.
+
+use std::time::Instant;
+
+use candle_core::Device;
+use candle_nn::VarMap;
+use protocol::config::Config;
+use protocol::{ActorId, EpisodeId, LatentPoint, PhiVersion};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+use crate::counts::VisitCounts;
+use crate::error::GraphServiceError;
+use crate::frontier::route_between;
+use crate::graph::{GraphBuilder, LatentGraph, NodeId};
+use crate::grid::Grid;
+use crate::hess::{HessMaps, HessParams};
+use crate::phi::Phi;
+use crate::store::{ChunkStates, TrajectoryStore};
+
+/// Largest xy step of the synthetic walks per env step, φ units.
+const XY_STEP: f32 = 0.5;
+/// Largest step of the other observation dimensions per env step.
+const JOINT_STEP: f32 = 0.05;
+/// Side of the square start region, in cells of the config's graph grid.
+const REGION_CELLS: f32 = 100.0;
+
+/// Timings of one rebuild.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RebuildTiming {
+    /// Stored states.
+    pub n_steps: u64,
+    /// Stored trajectories.
+    pub n_trajectories: usize,
+    /// φ re-mapping of every stored state, seconds.
+    pub map_secs: f64,
+    /// Graph construction from the latent points, seconds.
+    pub build_secs: f64,
+    /// Visit recount and HESS future-count recomputation, seconds.
+    pub counts_secs: f64,
+    /// Nodes of the built graph.
+    pub n_nodes: usize,
+    /// Undirected edges of the built graph.
+    pub n_edges: usize,
+}
+
+/// A synthetic store of about `n_steps` states (whole episodes, see the module doc).
+pub fn synthetic_store(
+    config: &Config,
+    obs_dim: usize,
+    n_steps: u64,
+    episode_len: usize,
+    seed: u64,
+) -> TrajectoryStore {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let region = REGION_CELLS * config.graph.cell_size as f32;
+    let per_episode = (episode_len + 1) as u64;
+    let mut store = TrajectoryStore::new(obs_dim, n_steps.max(per_episode));
+    for episode in 0..n_steps.div_ceil(per_episode) {
+        let (obs, latents) = random_walk(&mut rng, obs_dim, episode_len, region);
+        store.append(ChunkStates {
+            actor: ActorId(0),
+            episode: EpisodeId(episode),
+            chunk_index: 0,
+            first_env_step: 0,
+            episode_start: true,
+            episode_end: true,
+            obs,
+            latents,
+        });
+    }
+    store
+}
+
+/// One episode: `episode_len + 1` states, flat observations and their xy.
+fn random_walk(
+    rng: &mut Pcg64,
+    obs_dim: usize,
+    episode_len: usize,
+    region: f32,
+) -> (Vec<f32>, Vec<LatentPoint>) {
+    let mut state: Vec<f32> = (0..obs_dim).map(|_| rng.random_range(-0.1..0.1)).collect();
+    state[0] = rng.random_range(0.0..region);
+    state[1] = rng.random_range(0.0..region);
+    let mut obs = Vec::with_capacity((episode_len + 1) * obs_dim);
+    let mut latents = Vec::with_capacity(episode_len + 1);
+    for _ in 0..=episode_len {
+        obs.extend_from_slice(&state);
+        latents.push([state[0], state[1]]);
+        for (i, value) in state.iter_mut().enumerate() {
+            let step = if i < 2 { XY_STEP } else { JOINT_STEP };
+            *value += rng.random_range(-step..step);
+        }
+    }
+    (obs, latents)
+}
+
+/// The default config's encoder φ for `obs_dim`-D observations, seeded.
+pub fn random_phi(config: &Config, obs_dim: usize, seed: u64) -> Result<Phi, GraphServiceError> {
+    let dims = nets::TaskDims {
+        obs_dim,
+        goal_dim: 2,
+        action_dim: 8,
+        action_scale: 1.0,
+    };
+    let spec = nets::spec_from_config(config, dims)?;
+    let params = VarMap::new();
+    let vb = nets::seeded_var_builder(&params, seed, &Device::Cpu);
+    let set = nets::PolicySet::new(&spec, &vb)?;
+    Ok(Phi::new(set.encoder, PhiVersion(1)))
+}
+
+/// Times one rebuild of `store` (see the module doc) and returns the graph with the timings.
+pub fn time_rebuild(
+    config: &Config,
+    store: &TrajectoryStore,
+    phi: &Phi,
+) -> Result<(RebuildTiming, LatentGraph), GraphServiceError> {
+    let start = Instant::now();
+    let mut n_mapped = 0usize;
+    for trajectory in store.trajectories() {
+        n_mapped += phi.map(trajectory.obs())?.len();
+    }
+    let map_secs = start.elapsed().as_secs_f64();
+    if n_mapped as u64 != store.n_states() {
+        return Err(GraphServiceError::Internal(format!(
+            "mapped {n_mapped} of {} states",
+            store.n_states()
+        )));
+    }
+
+    let graph_config = &config.graph;
+    let grid = Grid::new(graph_config.cell_size, graph_config.node_position);
+    let start = Instant::now();
+    let mut builder = GraphBuilder::new(grid, graph_config.max_nodes, graph_config.edge_window);
+    for trajectory in store.trajectories() {
+        builder.add_trajectory(trajectory.latents());
+    }
+    let graph = builder.finish();
+    let build_secs = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let mut counts = VisitCounts::new(grid);
+    let mut hess = HessMaps::new(HessParams::from_config(config));
+    for trajectory in store.trajectories() {
+        counts.add(trajectory.latents());
+        hess.count(trajectory.latents());
+    }
+    hess.recompute_future(store);
+    let counts_secs = start.elapsed().as_secs_f64();
+
+    let timing = RebuildTiming {
+        n_steps: store.n_states(),
+        n_trajectories: store.n_trajectories(),
+        map_secs,
+        build_secs,
+        counts_secs,
+        n_nodes: graph.n_nodes(),
+        n_edges: graph.n_edges(),
+    };
+    Ok((timing, graph))
+}
+
+/// One timed route query.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RouteSample {
+    /// Start node.
+    pub from: NodeId,
+    /// End node.
+    pub to: NodeId,
+    /// Graph distance (env steps), `None` when unreachable.
+    pub distance: Option<u64>,
+    /// Wall time of the query, seconds.
+    pub secs: f64,
+}
+
+/// Times `n_queries` routes between uniformly random node pairs of `graph` (seeded), each
+/// the full query the service runs ([`route_between`]: Dijkstra and path recovery).
+pub fn time_routes(graph: &LatentGraph, n_queries: usize, seed: u64) -> Vec<RouteSample> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let n = graph.n_nodes() as NodeId;
+    if n == 0 {
+        return Vec::new();
+    }
+    (0..n_queries)
+        .map(|_| {
+            let (from, to) = (rng.random_range(0..n), rng.random_range(0..n));
+            let start = Instant::now();
+            let route = route_between(graph, from, to);
+            let secs = start.elapsed().as_secs_f64();
+            let distance = route.ok().map(|nodes| path_weight(graph, &nodes));
+            RouteSample {
+                from,
+                to,
+                distance,
+                secs,
+            }
+        })
+        .collect()
+}
+
+/// Sum of the edge weights along `nodes`.
+fn path_weight(graph: &LatentGraph, nodes: &[NodeId]) -> u64 {
+    nodes
+        .windows(2)
+        .filter_map(|w| graph.edge_weight(w[0], w[1]))
+        .map(u64::from)
+        .sum()
+}
+
+/// The `q`-quantile (0 ≤ q ≤ 1, nearest rank) of `values`; `None` when empty.
+pub fn quantile(values: &[f64], q: f64) -> Option<f64> {
+    let mut sorted: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if sorted.is_empty() {
+        return None;
+    }
+    sorted.sort_by(f64::total_cmp);
+    let rank = ((q.clamp(0.0, 1.0) * sorted.len() as f64).ceil() as usize).max(1);
+    sorted.get(rank - 1).copied()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_small_synthetic_store_rebuilds_into_a_connected_looking_graph() {
+        let config = Config::default();
+        let store = synthetic_store(&config, 29, 5_010, 500, 1);
+        assert_eq!(store.n_states(), 5_010);
+        assert_eq!(store.n_trajectories(), 10);
+        let phi = random_phi(&config, 29, 2).unwrap();
+        let (timing, graph) = time_rebuild(&config, &store, &phi).unwrap();
+        assert_eq!(timing.n_nodes, graph.n_nodes());
+        assert!(timing.n_nodes > 100, "{timing:?}");
+        assert!(
+            timing.n_edges >= timing.n_nodes - timing.n_trajectories,
+            "{timing:?}"
+        );
+        let samples = time_routes(&graph, 50, 3);
+        assert_eq!(samples.len(), 50);
+        for s in samples.iter().filter(|s| s.from == s.to) {
+            assert_eq!(s.distance, Some(0));
+        }
+    }
+
+    #[test]
+    fn quantiles_use_the_nearest_rank() {
+        let values: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(quantile(&values, 0.5), Some(50.0));
+        assert_eq!(quantile(&values, 0.99), Some(99.0));
+        assert_eq!(quantile(&values, 1.0), Some(100.0));
+        assert_eq!(quantile(&[], 0.5), None);
+    }
+}
