@@ -1,17 +1,21 @@
 //! `asi train --serial`: the same components as the process mode (actors, learner,
 //! graph-service) driven by one loop in one process, with no transport and no clock in the
 //! loop, so a run is deterministic for its seed: two runs with the same config produce
-//! identical `metrics.jsonl` files. Meant for debugging and for tests.
+//! identical `metrics.jsonl` files. Meant for debugging and for tests. Actors ask the
+//! graph-service (HESS exploration, reaching reports) by calling its request handler directly,
+//! with the same encoded messages as in process mode.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
 
-use actor::Actor;
+use actor::{Actor, GraphTransport, ServiceOracle};
 use anyhow::{bail, Context};
 use graph_service::GraphService;
 use learner::Learner;
+use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
 use protocol::ActorId;
 
+use crate::proc::actor::{actor_metrics, ReachMeans};
 use crate::proc::common::task_info;
 use crate::run::RunContext;
 
@@ -23,19 +27,22 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let task = task_info(config)?;
     let dims = task.dims;
     let seed = config.run.seed;
-    let mut learner = Learner::with_episode_length(config, dims, task.episode_length, seed).context("building the learner")?;
+    let mut learner =
+        Learner::with_episode_length(config, dims, task.episode_length, seed).context("building the learner")?;
     let mut graph = GraphService::new(config, dims, seed).context("building the graph-service")?;
     let mut actors = (0..config.run.n_actors as u32)
         .map(|id| Actor::new(config, ActorId(id), seed))
         .collect::<Result<Vec<_>, _>>()
         .context("building the actors")?;
     let mut metrics = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
+    let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
     broadcast_weights(&mut learner, &mut actors, &mut graph)?;
     let mut last_episodes = 0;
     while !budget_reached(config, &learner) {
-        for actor in &mut actors {
+        for (actor, line) in actors.iter_mut().zip(&mut actor_lines) {
             catch_up(&mut learner)?;
-            let chunk = actor.next_chunk()?;
+            let chunk = actor.next_chunk(&mut ServiceOracle::new(InProcessGraph(&mut graph)))?;
+            line.published_steps += u64::from(chunk.header.n_steps);
             learner.ingest(&chunk.header, &chunk.records)?;
             graph.ingest(&chunk.header, &chunk.records)?;
         }
@@ -43,11 +50,11 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         broadcast_weights(&mut learner, &mut actors, &mut graph)?;
         let episodes = learner.ingest_stats().episodes_completed;
         if episodes != last_episodes {
-            write_line(&mut metrics, &learner, &graph)?;
+            write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines)?;
             last_episodes = episodes;
         }
     }
-    write_line(&mut metrics, &learner, &graph)?;
+    write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines)?;
     metrics.flush()?;
     tracing::info!(env_steps = learner.progress().env_steps_ingested, "serial run finished");
     Ok(())
@@ -84,12 +91,43 @@ fn broadcast_weights(learner: &mut Learner, actors: &mut [Actor], graph: &mut Gr
     Ok(())
 }
 
+/// The in-process graph-service as the actors' transport: its request handler, called directly.
+struct InProcessGraph<'a>(&'a mut GraphService);
+
+impl GraphTransport for InProcessGraph<'_> {
+    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+        Ok(self.0.handle(header, body))
+    }
+}
+
+/// What serial mode tracks per actor for its metric lines.
+#[derive(Default)]
+struct ActorLine {
+    published_steps: u64,
+    reach_means: ReachMeans,
+}
+
 /// One JSON object per completed episode; only values that depend on the seed, no clock.
-fn write_line(out: &mut impl Write, learner: &Learner, graph: &GraphService) -> anyhow::Result<()> {
+/// Actor values use the process mode's names (`actor<i>/actor/…`).
+fn write_line(
+    out: &mut impl Write,
+    learner: &Learner,
+    graph: &GraphService,
+    actors: &[Actor],
+    lines: &mut [ActorLine],
+) -> anyhow::Result<()> {
     let mut object = serde_json::Map::new();
     for (name, value) in learner.metrics() {
         if !name.contains("per_sec") {
             object.insert(format!("learner/{name}"), serde_json::json!(value));
+        }
+    }
+    for (i, (actor, line)) in actors.iter().zip(lines.iter_mut()).enumerate() {
+        let stats = actor.stats();
+        let mut values = actor_metrics(&stats, line.published_steps);
+        values.extend(line.reach_means.since_last(&stats));
+        for (name, value) in values {
+            object.insert(format!("actor{i}/{name}"), serde_json::json!(value));
         }
     }
     object.insert("graph-service/graph/stored_steps".to_owned(), serde_json::json!(graph.stats().stored_steps));

@@ -6,11 +6,12 @@
 //! batch 1 that costs far more than it gains (measured 8× slower on 2 busy cores), so actor
 //! processes should run with `RAYON_NUM_THREADS=1`. The value in effect is printed.
 //! For each task and low-level variant it prints the median of 3 timed repeats after one
-//! warm-up chunk. `random_episodes = 0`, so the high policy runs at every decision.
+//! warm-up chunk. `random_episodes = 0`, so the high policy runs at every decision; there is no
+//! graph-service ([`actor::NoGraph`]), so no decision explores.
 
 use std::time::Instant;
 
-use actor::Actor;
+use actor::{Actor, NoGraph};
 use protocol::config::LowAlgo;
 use protocol::{ActorId, Config};
 
@@ -31,7 +32,7 @@ fn measure(actor: &mut Actor, n_steps: u64) -> Result<f64, actor::ActorError> {
     let start_steps = actor.stats().env_steps;
     let start = Instant::now();
     while actor.stats().env_steps - start_steps < n_steps {
-        actor.next_chunk()?;
+        actor.next_chunk(&mut NoGraph)?;
     }
     let steps = actor.stats().env_steps - start_steps;
     Ok(steps as f64 / start.elapsed().as_secs_f64())
@@ -52,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (task, base_steps) in CASES {
         for algo in [LowAlgo::Sac, LowAlgo::Deterministic] {
             let mut actor = Actor::new(&config(task, algo), ActorId(0), 1)?;
-            actor.next_chunk()?;
+            actor.next_chunk(&mut NoGraph)?;
             let n_steps = (base_steps as f64 * scale).max(1.0) as u64;
             let mut rates = (0..REPEATS)
                 .map(|_| measure(&mut actor, n_steps))

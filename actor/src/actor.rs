@@ -1,13 +1,21 @@
 //! [`Actor`]: the rollout component as a transport-agnostic state machine (SPEC §3, §6.1).
 //!
 //! The caller drives it: [`Actor::next_chunk`] steps the environment until a chunk is complete
-//! and returns it; [`Actor::load_weights`] installs a weights message between calls. The actor
-//! does no I/O and owns no threads, so the `asi` binary can wire it to iceoryx2 (process mode)
-//! or to in-process queues (serial mode) with the same behaviour.
+//! and returns it; [`Actor::load_weights`] installs a weights message (and the run-wide
+//! [`RunSchedule`] it carries) between calls. The actor does no I/O and owns no threads: the
+//! graph-service is reached through the [`GraphOracle`] the caller passes to `next_chunk`, so the
+//! `asi` binary can wire it to iceoryx2 (process mode) or to in-process calls (serial mode) with
+//! the same behaviour.
 //!
 //! Invariants:
 //! - Determinism: for a given config, actor id, seed and sequence of calls (including which
-//!   weights are loaded between which chunks), the chunks are bit-identical.
+//!   weights are loaded between which chunks, and the oracle's answers), the chunks are
+//!   bit-identical.
+//! - An episode's exploration gate (`count_prob`, run-wide episode count) is the schedule of
+//!   the last weights loaded before it started; it does not change mid-episode.
+//! - `FAR_GOAL` is set on every chunk of an episode whose goal is a far goal
+//!   (`Maze::is_far_goal_with_fraction` with `exploration.far_goal_fraction`; tasks without a
+//!   maze have no far goals, as the code's `g_y ≥ 8` rule never holds for the cheetah).
 //! - Every chunk is non-empty; chunk indices of an episode run 0, 1, 2, … without gaps;
 //!   `EPISODE_START` marks exactly the first chunk and `EPISODE_END` exactly the last.
 //! - Episode ids are `(actor_id << 40) | local episode index` ([`crate::seeds::episode_id`]),
@@ -18,24 +26,29 @@
 use envs::api::{Env, EnvSpec};
 use nets::{NetsSpec, TaskDims};
 use protocol::{
-    ActorId, Config, PhiVersion, PolicyVersion, StepLayout, TrajectoryFlags, TrajectoryHeader,
-    WeightsHeader,
+    ActorId, Config, PhiVersion, PolicyVersion, RunSchedule, StepLayout, TrajectoryFlags,
+    TrajectoryHeader, WeightsHeader,
 };
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 
 use crate::chunk::{header_for, Chunk, ChunkBuffer};
-use crate::episode::{Episode, Rollout, RolloutParams, StepOutcome};
+use crate::episode::{DecisionCounters, Episode, Rollout, RolloutParams, StepOutcome};
 use crate::error::{ActorError, WeightsRejection};
 use crate::exploration::DeterministicNoise;
 use crate::networks::ActorNets;
+use crate::oracle::GraphOracle;
 use crate::record::RecordWriter;
 use crate::seeds::{actor_rng_seed, env_seed, episode_id};
-use crate::subgoal::SubgoalSource;
+use crate::subgoal::{ExploreGate, SubgoalPlan, SubgoalSource};
 
 /// Consecutive episodes without a single recorded step after which [`Actor::next_chunk`] gives up
 /// with [`ActorError::NoProgress`] instead of looping on a broken environment. Source: ours.
 pub const MAX_EMPTY_EPISODES: u32 = 100;
+
+/// Reaching samples are reported at episode end, or as soon as this many are pending.
+/// Source: ours (an episode has at most T/c of them: 25 on U, 50 elsewhere).
+pub const REACH_REPORT_BATCH: usize = 64;
 
 /// Counters of one actor, for metrics.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,6 +70,36 @@ pub struct ActorStats {
     pub last_episode_success: bool,
     /// Weights messages refused by [`Actor::load_weights`].
     pub n_weights_rejected: u64,
+    /// The run-wide schedule of the last weights loaded ([`RunSchedule::START`] before any).
+    pub schedule: RunSchedule,
+    /// High-level decisions taken.
+    pub n_decisions: u64,
+    /// Decisions that took the graph-service's HESS explore subgoal.
+    pub n_explore_decisions: u64,
+    /// Decisions that asked for an explore subgoal and got no answer (the policy, or the random
+    /// warm-up source, decided instead).
+    pub n_explore_fallbacks: u64,
+    /// Reaching reports acknowledged by the graph-service.
+    pub n_reach_reports: u64,
+    /// Reaching samples delivered.
+    pub n_reach_samples_sent: u64,
+    /// Reaching samples dropped (the report was not acknowledged, or its episode was abandoned).
+    pub n_reach_samples_dropped: u64,
+    /// Σ of the reaching errors ‖subgoal − φ(s_{t+c})‖ of every full segment of finished
+    /// episodes.
+    pub reach_error_sum: f64,
+    /// Full segments in `reach_error_sum`.
+    pub n_reach_segments: u64,
+    /// Σ of the reaching errors of the full explore segments of finished episodes.
+    pub explore_reach_error_sum: f64,
+    /// Full explore segments in `explore_reach_error_sum`.
+    pub n_explore_reach_segments: u64,
+    /// Mean reaching error over the full segments of the last finished episode (`None`: none).
+    pub last_episode_reach_error: Option<f32>,
+    /// Mean reaching error over the full explore segments of the last finished episode.
+    pub last_episode_explore_reach_error: Option<f32>,
+    /// Whether the last finished episode had a far goal.
+    pub last_episode_far_goal: bool,
 }
 
 /// One actor: an environment, the actor-side networks, and the episode in progress.
@@ -71,26 +114,33 @@ pub struct Actor {
     seed: u64,
     chunk_steps: usize,
     random_episodes: u64,
+    explore_start_episode: u64,
+    far_goal_fraction: f64,
     n_episodes_started: u64,
     stats: ActorStats,
 }
 
 impl Actor {
-    /// Builds env (`envs::registry::make(&config.env.task)`), networks
+    /// Builds env (`envs::make_with(&config.env.task, …)` with `env.episode_length` as the
+    /// env's own episode length), networks
     /// (`nets::spec_from_config` with the env's dims; a `PolicySet` on a `VarMap` seeded from
     /// `seed`, so a learner that builds its `PolicySet` first from the same seed starts from the
     /// same weights) and the generator for noise (`Pcg64Mcg` from `seed` mixed with `actor_id`).
     pub fn new(config: &Config, actor_id: ActorId, seed: u64) -> Result<Actor, ActorError> {
+        let options = envs::EnvOptions {
+            max_steps: config.env.episode_length,
+        };
         Self::with_env(
             config,
             actor_id,
             seed,
-            envs::registry::make(&config.env.task)?,
+            envs::make_with(&config.env.task, options)?,
         )
     }
 
     /// As [`Actor::new`], on an environment the caller built (e.g. a task with non-default
-    /// parameters); `config.env.task` is not looked at.
+    /// parameters); `config.env.task` is not looked at, and `config.env.episode_length`, if
+    /// set, must equal the env's own length (the env truncates its episodes).
     pub fn with_env(
         config: &Config,
         actor_id: ActorId,
@@ -127,6 +177,8 @@ impl Actor {
             action: vec![0.0; spec.action_dim],
             zeros: vec![0.0; nets_spec.latent_dim],
             record: vec![0.0; layout.record_len()],
+            phi_version: PhiVersion(0),
+            decisions: DecisionCounters::default(),
         };
         Ok(Actor {
             rollout,
@@ -139,6 +191,8 @@ impl Actor {
             seed,
             chunk_steps,
             random_episodes: config.learner.high.random_episodes,
+            explore_start_episode: config.exploration.explore_start_episode,
+            far_goal_fraction: config.exploration.far_goal_fraction,
             n_episodes_started: 0,
             stats: ActorStats {
                 env_steps: 0,
@@ -149,6 +203,20 @@ impl Actor {
                 last_episode_return: 0.0,
                 last_episode_success: false,
                 n_weights_rejected: 0,
+                schedule: RunSchedule::START,
+                n_decisions: 0,
+                n_explore_decisions: 0,
+                n_explore_fallbacks: 0,
+                n_reach_reports: 0,
+                n_reach_samples_sent: 0,
+                n_reach_samples_dropped: 0,
+                reach_error_sum: 0.0,
+                n_reach_segments: 0,
+                explore_reach_error_sum: 0.0,
+                n_explore_reach_segments: 0,
+                last_episode_reach_error: None,
+                last_episode_explore_reach_error: None,
+                last_episode_far_goal: false,
             },
         })
     }
@@ -176,20 +244,24 @@ impl Actor {
 
     /// Steps the env until a chunk is complete: `transport.chunk_steps` records, or fewer at
     /// episode end. Never returns an empty chunk. On error the current episode is abandoned.
-    pub fn next_chunk(&mut self) -> Result<Chunk, ActorError> {
-        let result = self.fill_chunk();
+    /// `oracle` answers the HESS exploration requests and takes the reaching reports
+    /// ([`crate::NoGraph`] where there is no graph-service).
+    pub fn next_chunk(&mut self, oracle: &mut dyn GraphOracle) -> Result<Chunk, ActorError> {
+        let result = self.fill_chunk(oracle);
         if let Err(err) = &result {
             tracing::warn!(actor = self.actor_id.0, error = %err, "abandoning the current episode");
-            self.episode = None;
+            if let Some(episode) = self.episode.take() {
+                self.stats.n_reach_samples_dropped += episode.reach_samples.len() as u64;
+            }
             self.buffer.clear();
         }
         result
     }
 
-    fn fill_chunk(&mut self) -> Result<Chunk, ActorError> {
+    fn fill_chunk(&mut self, oracle: &mut dyn GraphOracle) -> Result<Chunk, ActorError> {
         let mut n_empty_episodes = 0;
         loop {
-            if let Some(chunk) = self.take_ready_chunk() {
+            if let Some(chunk) = self.take_ready_chunk(oracle) {
                 return Ok(chunk);
             }
             if self.episode.is_none() {
@@ -203,13 +275,13 @@ impl Actor {
                 n_empty_episodes += 1;
                 self.start_episode()?;
             }
-            self.step()?;
+            self.step(oracle)?;
         }
     }
 
     /// A full chunk once `chunk_steps + 1` records are buffered, or the rest of an episode that
     /// has ended (then the episode is finished). `None` if neither.
-    fn take_ready_chunk(&mut self) -> Option<Chunk> {
+    fn take_ready_chunk(&mut self, oracle: &mut dyn GraphOracle) -> Option<Chunk> {
         let end_flags = self.episode.as_ref()?.end_flags;
         let n_records = self.buffer.n_records();
         if n_records > self.chunk_steps {
@@ -221,7 +293,7 @@ impl Actor {
         } else {
             None
         };
-        self.finish_episode();
+        self.finish_episode(oracle);
         chunk
     }
 
@@ -229,6 +301,9 @@ impl Actor {
         let episode = self.episode.as_mut()?;
         if episode.next_chunk_index == 0 {
             flags |= TrajectoryFlags::EPISODE_START;
+        }
+        if episode.far_goal {
+            flags |= TrajectoryFlags::FAR_GOAL;
         }
         let cut = self.buffer.cut(n_records, self.stats.policy_version);
         let mut header = header_for(&self.header_template, &cut, episode.next_chunk_index, flags);
@@ -253,18 +328,27 @@ impl Actor {
             .env
             .reset(env_seed(self.seed, self.actor_id, index));
         let phi = self.rollout.nets.phi_rows(&reset.obs, 1)?;
-        let source = SubgoalSource::for_training_episode(index, self.random_episodes);
-        self.episode = Some(Episode::new(id, source, reset, phi));
+        let plan = SubgoalPlan {
+            base: SubgoalSource::for_training_episode(index, self.random_episodes),
+            explore: ExploreGate::for_schedule(&self.stats.schedule, self.explore_start_episode),
+        };
+        let far_goal =
+            self.rollout.env.maze().is_some_and(|maze| {
+                maze.is_far_goal_with_fraction(reset.goal, self.far_goal_fraction)
+            });
+        self.episode = Some(Episode::new(id, plan, far_goal, reset, phi));
         Ok(())
     }
 
-    fn step(&mut self) -> Result<(), ActorError> {
+    fn step(&mut self, oracle: &mut dyn GraphOracle) -> Result<(), ActorError> {
         let Some(episode) = self.episode.as_mut() else {
             return Ok(());
         };
         let env_step = u64::from(episode.t);
-        let outcome = episode.step(&mut self.rollout)?;
+        let outcome = episode.step(&mut self.rollout, oracle)?;
         self.stats.env_steps += 1;
+        let full_batch = (episode.reach_samples.len() >= REACH_REPORT_BATCH)
+            .then(|| std::mem::take(&mut episode.reach_samples));
         match outcome {
             StepOutcome::Recorded(_) => {
                 self.buffer
@@ -277,14 +361,28 @@ impl Actor {
                 "physics failure: step not recorded, episode ended"
             ),
         }
+        if let Some(samples) = full_batch {
+            self.report_reaching(oracle, &samples);
+        }
         Ok(())
     }
 
-    fn finish_episode(&mut self) {
+    fn finish_episode(&mut self, oracle: &mut dyn GraphOracle) {
         if let Some(episode) = self.episode.take() {
-            self.stats.episodes += 1;
-            self.stats.last_episode_return = episode.episode_return;
-            self.stats.last_episode_success = episode.success;
+            if !episode.reach_samples.is_empty() {
+                self.report_reaching(oracle, &episode.reach_samples);
+            }
+            let stats = &mut self.stats;
+            stats.episodes += 1;
+            stats.last_episode_return = episode.episode_return;
+            stats.last_episode_success = episode.success;
+            stats.last_episode_far_goal = episode.far_goal;
+            stats.reach_error_sum += episode.reach_all.sum;
+            stats.n_reach_segments += episode.reach_all.n;
+            stats.explore_reach_error_sum += episode.reach_explore.sum;
+            stats.n_explore_reach_segments += episode.reach_explore.n;
+            stats.last_episode_reach_error = episode.reach_all.mean();
+            stats.last_episode_explore_reach_error = episode.reach_explore.mean();
             tracing::debug!(
                 actor = self.actor_id.0,
                 episode = episode.id.0,
@@ -296,8 +394,29 @@ impl Actor {
         }
     }
 
-    /// Checks `header` (protocol version, layout hash, length), loads the actor-side weights
-    /// and relabels the φ values of the running episode. A rejected message is an
+    /// Sends reaching samples; a report that is not acknowledged drops them (counted).
+    fn report_reaching(
+        &mut self,
+        oracle: &mut dyn GraphOracle,
+        samples: &[protocol::graph::ReachSample],
+    ) {
+        let n = samples.len() as u64;
+        match oracle.report_reaching(samples, self.stats.phi_version) {
+            Ok(true) => {
+                self.stats.n_reach_reports += 1;
+                self.stats.n_reach_samples_sent += n;
+            }
+            Ok(false) => self.stats.n_reach_samples_dropped += n,
+            Err(err) => {
+                tracing::warn!(actor = self.actor_id.0, error = %err, "reaching report failed");
+                self.stats.n_reach_samples_dropped += n;
+            }
+        }
+    }
+
+    /// Checks `header` (protocol version, layout hash, length), loads the actor-side weights,
+    /// keeps the run-wide schedule it carries (used from the next episode on) and relabels the
+    /// φ values of the running episode. A rejected message is an
     /// [`ActorError::WeightsRejected`], changes nothing and is counted.
     pub fn load_weights(&mut self, header: &WeightsHeader, bytes: &[u8]) -> Result<(), ActorError> {
         let loaded = header
@@ -315,6 +434,8 @@ impl Actor {
         }
         self.stats.policy_version = header.policy_version;
         self.stats.phi_version = header.phi_version;
+        self.stats.schedule = header.schedule;
+        self.rollout.phi_version = header.phi_version;
         if let Some(episode) = self.episode.as_mut() {
             episode.relabel_phi(
                 &mut self.rollout.nets,
@@ -342,8 +463,12 @@ impl Actor {
 
     /// Counters for metrics.
     pub fn stats(&self) -> ActorStats {
+        let decisions = self.rollout.decisions;
         ActorStats {
             n_physics_failures: self.rollout.env.n_physics_failures(),
+            n_decisions: decisions.n_decisions,
+            n_explore_decisions: decisions.n_explore,
+            n_explore_fallbacks: decisions.n_explore_fallbacks,
             ..self.stats
         }
     }
@@ -368,18 +493,20 @@ fn symmetric_action_bound(spec: &EnvSpec) -> Result<f32, ActorError> {
     }
 }
 
-/// Stepping parameters; `env.episode_length` may shorten the task's episodes but not lengthen
-/// them (`envs::registry::make` builds the task with its own length).
+/// Stepping parameters; `env.episode_length`, if set, must be the env's own length (the env
+/// truncates; [`Actor::new`] builds it with that length).
 fn rollout_params(config: &Config, spec: &EnvSpec) -> Result<RolloutParams, ActorError> {
-    let episode_length = config.env.episode_length.unwrap_or(spec.max_steps);
-    if episode_length > spec.max_steps {
-        return Err(ActorError::TaskMismatch {
-            task: spec.name.clone(),
-            reason: format!(
-                "env.episode_length = {episode_length} exceeds the task's own length {}; use at most {}",
-                spec.max_steps, spec.max_steps
-            ),
-        });
+    if let Some(episode_length) = config.env.episode_length {
+        if episode_length != spec.max_steps {
+            return Err(ActorError::TaskMismatch {
+                task: spec.name.clone(),
+                reason: format!(
+                    "env.episode_length = {episode_length} but the environment was built with max_steps = {}; \
+                     build it with envs::make_with and EnvOptions {{ max_steps: Some({episode_length}) }}",
+                    spec.max_steps
+                ),
+            });
+        }
     }
     if spec.goal_dim != 2 {
         return Err(ActorError::TaskMismatch {
@@ -394,7 +521,6 @@ fn rollout_params(config: &Config, spec: &EnvSpec) -> Result<RolloutParams, Acto
     Ok(RolloutParams {
         c: config.hierarchy.c,
         abs_range: config.hierarchy.abs_range as f32,
-        episode_length,
         noise: DeterministicNoise {
             noise_scale: deterministic.noise_scale as f32,
             random_eps: deterministic.random_eps,

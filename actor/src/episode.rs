@@ -7,18 +7,25 @@
 //! - `subgoal = φ(decision_obs) + delta`, where `decision_obs` and `delta` are those of the last
 //!   decision; when a new φ arrives mid-segment the subgoal is re-anchored in the new φ-space
 //!   with the same delta ([`Episode::relabel_phi`]).
+//!   An explore decision sets `subgoal` to the oracle's point and `delta = subgoal − φ(s_t)`.
 //! - A step whose physics failed is not recorded; it ends the episode with
 //!   `EPISODE_END | TERMINATED | PHYSICS_FAILURE`.
+//! - Reaching errors (digest §2.3 A.1, §5.3): a segment that ran all c steps has the error
+//!   ‖subgoal − φ(s_{t+c})‖ at its end. Every such segment enters the episode's reaching
+//!   statistics; an explore segment followed by another decision (not the episode's last) also
+//!   yields a [`ReachSample`] at its un-pushed candidate, for the graph-service's potential map.
 
 use envs::api::{Env, Reset, Step};
-use protocol::{DecisionKind, EpisodeId, TrajectoryFlags};
+use protocol::graph::ReachSample;
+use protocol::{DecisionKind, EpisodeId, LatentPoint, PhiVersion, TrajectoryFlags};
 use rand_pcg::Pcg64Mcg;
 
 use crate::error::ActorError;
 use crate::exploration::{clip, low_action, DeterministicNoise};
 use crate::networks::ActorNets;
+use crate::oracle::GraphOracle;
 use crate::record::{RecordWriter, StepFields};
-use crate::subgoal::{DecisionInputs, SubgoalSource};
+use crate::subgoal::{DecisionInputs, SubgoalPlan, SubgoalSource};
 
 /// Fixed per-run parameters of stepping.
 #[derive(Debug, Clone)]
@@ -27,8 +34,6 @@ pub(crate) struct RolloutParams {
     pub c: u32,
     /// Half-width of the high action box.
     pub abs_range: f32,
-    /// Steps after which the actor truncates an episode (≤ the env's own `max_steps`).
-    pub episode_length: u32,
     /// Noise of the deterministic low-level variant.
     pub noise: DeterministicNoise,
     /// Env action bounds.
@@ -49,6 +54,42 @@ pub(crate) struct Rollout {
     pub zeros: Vec<f32>,
     /// Scratch: the record being written.
     pub record: Vec<f32>,
+    /// φ version of the acting encoder.
+    pub phi_version: PhiVersion,
+    /// Decision counters over all episodes.
+    pub decisions: DecisionCounters,
+}
+
+/// Decision counters of an actor, over all its episodes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct DecisionCounters {
+    /// High-level decisions taken.
+    pub n_decisions: u64,
+    /// Decisions that took the graph-service's explore subgoal.
+    pub n_explore: u64,
+    /// Decisions that asked for an explore subgoal and got none (the base source decided).
+    pub n_explore_fallbacks: u64,
+}
+
+/// Sum and count of segment reaching errors.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct ReachTally {
+    /// Σ ‖subgoal − φ(s_{t+c})‖ over the counted segments.
+    pub sum: f64,
+    /// Segments counted.
+    pub n: u64,
+}
+
+impl ReachTally {
+    fn add(&mut self, error: f32) {
+        self.sum += f64::from(error);
+        self.n += 1;
+    }
+
+    /// The mean, `None` when nothing was counted.
+    pub fn mean(&self) -> Option<f32> {
+        (self.n > 0).then(|| (self.sum / self.n as f64) as f32)
+    }
 }
 
 /// What a step produced.
@@ -66,7 +107,9 @@ pub(crate) struct Episode {
     /// Run-unique id.
     pub id: EpisodeId,
     /// How this episode's subgoals are chosen.
-    pub source: SubgoalSource,
+    pub plan: SubgoalPlan,
+    /// The goal is a far goal (chunks carry `FAR_GOAL`).
+    pub far_goal: bool,
     /// Env steps taken so far (= episode step index of the next step).
     pub t: u32,
     /// Index of the next chunk to cut.
@@ -77,6 +120,16 @@ pub(crate) struct Episode {
     pub episode_return: f32,
     /// The env reported success on some recorded step.
     pub success: bool,
+    /// Reaching errors of every full segment.
+    pub reach_all: ReachTally,
+    /// Reaching errors of the full explore segments.
+    pub reach_explore: ReachTally,
+    /// Reaching samples not yet reported to the graph-service.
+    pub reach_samples: Vec<ReachSample>,
+    /// Source of the segment in progress (`None` before the first decision).
+    segment_source: Option<SubgoalSource>,
+    /// Un-pushed candidate of the explore segment in progress.
+    candidate: Option<LatentPoint>,
     obs: Vec<f32>,
     phi: Vec<f32>,
     goal: Vec<f32>,
@@ -87,16 +140,28 @@ pub(crate) struct Episode {
 
 impl Episode {
     /// An episode starting from `reset`, with φ(s_0) = `phi`.
-    pub fn new(id: EpisodeId, source: SubgoalSource, reset: Reset, phi: Vec<f32>) -> Self {
+    pub fn new(
+        id: EpisodeId,
+        plan: SubgoalPlan,
+        far_goal: bool,
+        reset: Reset,
+        phi: Vec<f32>,
+    ) -> Self {
         let latent = phi.len();
         Self {
             id,
-            source,
+            plan,
+            far_goal,
             t: 0,
             next_chunk_index: 0,
             end_flags: None,
             episode_return: 0.0,
             success: false,
+            reach_all: ReachTally::default(),
+            reach_explore: ReachTally::default(),
+            reach_samples: Vec::new(),
+            segment_source: None,
+            candidate: None,
             decision_obs: reset.obs.clone(),
             obs: reset.obs,
             goal: reset.goal.to_vec(),
@@ -107,8 +172,12 @@ impl Episode {
     }
 
     /// Takes one env step; on `Recorded` the record is in `rollout.record`.
-    pub fn step(&mut self, rollout: &mut Rollout) -> Result<StepOutcome, ActorError> {
-        let decision = self.decide_if_due(rollout)?;
+    pub fn step(
+        &mut self,
+        rollout: &mut Rollout,
+        oracle: &mut dyn GraphOracle,
+    ) -> Result<StepOutcome, ActorError> {
+        let decision = self.decide_if_due(rollout, oracle)?;
         self.choose_action(rollout)?;
         let step = rollout.env.step(&rollout.action)?;
         self.t += 1;
@@ -120,7 +189,7 @@ impl Episode {
             return Ok(StepOutcome::PhysicsFailure);
         }
         let next_phi = rollout.nets.phi_rows(&step.obs, 1)?;
-        let truncated = step.truncated || self.t >= rollout.params.episode_length;
+        let truncated = step.truncated;
         self.write_record(rollout, &step, &next_phi, decision, truncated)?;
         self.episode_return += step.reward;
         self.success |= step.info.success;
@@ -139,31 +208,69 @@ impl Episode {
                 0
             };
             self.end_flags = Some(flags);
+            if self.t.is_multiple_of(rollout.params.c) {
+                self.close_segment(false);
+            }
         }
         Ok(StepOutcome::Recorded(self.end_flags))
     }
 
-    /// At t mod c = 0: a new delta from the episode's source and `subgoal = φ(s_t) + delta`.
-    fn decide_if_due(&mut self, rollout: &mut Rollout) -> Result<DecisionKind, ActorError> {
+    /// Tallies the reaching error of the segment that ends now at φ(s_t) = `phi`; `followed`:
+    /// another decision follows (then an explore segment is also reported).
+    fn close_segment(&mut self, followed: bool) {
+        let Some(source) = self.segment_source else {
+            return;
+        };
+        let error = self
+            .subgoal
+            .iter()
+            .zip(&self.phi)
+            .map(|(sg, phi)| (sg - phi) * (sg - phi))
+            .sum::<f32>()
+            .sqrt();
+        self.reach_all.add(error);
+        if source == SubgoalSource::Explore {
+            self.reach_explore.add(error);
+            if let (true, Some(subgoal)) = (followed, self.candidate) {
+                self.reach_samples.push(ReachSample { subgoal, error });
+            }
+        }
+    }
+
+    /// At t mod c = 0: closes the previous segment and decides the next (delta and subgoal from
+    /// the episode's plan).
+    fn decide_if_due(
+        &mut self,
+        rollout: &mut Rollout,
+        oracle: &mut dyn GraphOracle,
+    ) -> Result<DecisionKind, ActorError> {
         if !self.t.is_multiple_of(rollout.params.c) {
             return Ok(DecisionKind::None);
         }
+        self.close_segment(true);
         let inputs = DecisionInputs {
             obs: &self.obs,
+            phi: &self.phi,
             goal: &self.goal,
             abs_range: rollout.params.abs_range,
+            phi_version: rollout.phi_version,
         };
-        self.source.decide(
+        let decided = self.plan.decide(
             &inputs,
             &mut rollout.nets,
             &mut rollout.rng,
+            oracle,
             &mut self.delta,
+            &mut self.subgoal,
         )?;
         self.decision_obs.copy_from_slice(&self.obs);
-        for ((sg, phi), delta) in self.subgoal.iter_mut().zip(&self.phi).zip(&self.delta) {
-            *sg = phi + delta;
-        }
-        Ok(self.source.decision_kind())
+        self.segment_source = Some(decided.source);
+        self.candidate = decided.candidate;
+        let counters = &mut rollout.decisions;
+        counters.n_decisions += 1;
+        counters.n_explore += u64::from(decided.source == SubgoalSource::Explore);
+        counters.n_explore_fallbacks += u64::from(decided.fallback);
+        Ok(decided.source.decision_kind())
     }
 
     /// The low level's exploratory action on `[obs, φ(obs), subgoal]`, clipped to the env
@@ -232,13 +339,19 @@ impl Episode {
         let latent = self.phi.len();
         let fresh = nets.phi_rows(&[&self.obs[..], &self.decision_obs[..]].concat(), 2)?;
         self.phi.copy_from_slice(&fresh[..latent]);
-        for ((sg, phi_d), delta) in self
+        for (i, ((sg, phi_d), delta)) in self
             .subgoal
             .iter_mut()
             .zip(&fresh[latent..])
             .zip(&self.delta)
+            .enumerate()
         {
-            *sg = phi_d + delta;
+            let moved = phi_d + delta;
+            // The candidate moves with the subgoal, so both stay in the acting φ-space.
+            if let Some(candidate) = self.candidate.as_mut().and_then(|c| c.get_mut(i)) {
+                *candidate += moved - *sg;
+            }
+            *sg = moved;
         }
         for record in records {
             let rows = [writer.obs(record), writer.next_obs(record)].concat();

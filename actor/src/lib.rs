@@ -6,7 +6,10 @@
 //! - [`chunk`]: [`Chunk`] and the buffer chunks are cut from.
 //! - [`episode`]: one episode's stepping: high-level decisions every c steps, low-level actions,
 //!   φ labels, records.
-//! - [`subgoal`]: [`SubgoalSource`], how the high level decides (random warm-up, policy).
+//! - [`subgoal`]: [`SubgoalSource`], how the high level decides (random warm-up, policy, HESS
+//!   exploration through the graph-service).
+//! - [`oracle`]: [`GraphOracle`], the graph-service questions of an acting actor, with
+//!   [`NoGraph`] and [`ServiceOracle`] (the protocol over any [`GraphTransport`]).
 //! - [`eval`]: [`eval::Evaluator`], deterministic evaluation episodes on the test goal.
 //! - [`exploration`]: sampling and noise for both levels, clipping.
 //! - [`networks`]: φ, π_hi, π_lo inference with double-buffered weights.
@@ -24,6 +27,7 @@ pub mod error;
 pub mod eval;
 mod exploration;
 mod networks;
+pub mod oracle;
 mod record;
 pub mod seeds;
 pub mod subgoal;
@@ -31,4 +35,5 @@ pub mod subgoal;
 pub use actor::{Actor, ActorStats};
 pub use chunk::Chunk;
 pub use error::{ActorError, WeightsRejection};
-pub use subgoal::SubgoalSource;
+pub use oracle::{ExploreAnswer, GraphOracle, GraphTransport, NoGraph, ServiceOracle};
+pub use subgoal::{ExploreGate, SubgoalSource};

@@ -1,7 +1,7 @@
 //! The actor state machine on the real point-maze task: chunk shapes, episode bookkeeping,
 //! φ labels, subgoal holding, determinism, physics failures and weights loading.
 
-use actor::{Actor, ActorError, Chunk};
+use actor::{Actor, ActorError, Chunk, NoGraph};
 use candle_core::Device;
 use candle_nn::VarMap;
 use envs::api::{Env, EnvError, EnvSpec, Reset, Step};
@@ -42,7 +42,7 @@ fn decode(chunk: &Chunk) -> Vec<StepRecord> {
 fn episodes(actor: &mut Actor, n: usize) -> Vec<Vec<Chunk>> {
     let mut out = vec![Vec::new()];
     while out.len() <= n {
-        let chunk = actor.next_chunk().unwrap();
+        let chunk = actor.next_chunk(&mut NoGraph).unwrap();
         let ended = chunk.header.flags.contains(F::EPISODE_END);
         out.last_mut().unwrap().push(chunk);
         if ended {
@@ -166,7 +166,7 @@ fn the_same_seed_gives_identical_chunks_and_another_seed_does_not() {
     let run = |actor_id, seed| {
         let mut actor = Actor::new(&config(30, 100), ActorId(actor_id), seed).unwrap();
         (0..9)
-            .map(|_| actor.next_chunk().unwrap())
+            .map(|_| actor.next_chunk(&mut NoGraph).unwrap())
             .collect::<Vec<_>>()
     };
     assert_eq!(run(2, 11), run(2, 11));
@@ -189,12 +189,26 @@ fn the_deterministic_low_variant_acts_within_bounds() {
 }
 
 #[test]
-fn an_episode_length_beyond_the_task_is_refused_with_both_numbers() {
-    let err = match Actor::new(&config(50, 600), ActorId(0), 0) {
+fn the_configured_episode_length_is_the_envs_own_even_beyond_the_task_default() {
+    let mut actor = Actor::new(&config(100, 600), ActorId(0), 0).unwrap();
+    let episode = &episodes(&mut actor, 1)[0];
+    let records = records_of(episode);
+    assert_eq!(
+        records.len(),
+        600,
+        "pointmaze-u's own 500 steps are overridden"
+    );
+    assert!(records[599].truncated && records[..599].iter().all(|r| !r.truncated));
+}
+
+#[test]
+fn an_env_built_with_another_length_than_the_config_is_refused_with_both_numbers() {
+    let env = envs::registry::make("pointmaze-u").unwrap();
+    let err = match Actor::with_env(&config(50, 100), ActorId(0), 0, env) {
         Err(err) => err.to_string(),
-        Ok(_) => panic!("pointmaze-u runs 500 steps; 600 must be refused"),
+        Ok(_) => panic!("an env of 500 steps under env.episode_length = 100 must be refused"),
     };
-    assert!(err.contains("600") && err.contains("500"), "{err}");
+    assert!(err.contains("100") && err.contains("500"), "{err}");
 }
 
 /// Point maze U whose step `fail_at` (0-based) reports a physics failure, in the first episode
@@ -245,7 +259,10 @@ impl Env for FailingEnv {
 }
 
 fn failing_actor(fail_at: u32, every_episode: bool) -> Actor {
-    let inner = envs::registry::make("pointmaze-u").unwrap();
+    let options = envs::EnvOptions {
+        max_steps: Some(100),
+    };
+    let inner = envs::make_with("pointmaze-u", options).unwrap();
     let env = FailingEnv {
         inner,
         fail_at,
@@ -280,7 +297,7 @@ fn a_physics_failure_on_a_chunk_boundary_still_ends_the_episode_in_a_non_empty_c
 #[test]
 fn a_physics_failure_on_the_first_step_yields_no_chunk_and_the_next_episode_follows() {
     let mut actor = failing_actor(0, false);
-    let chunk = actor.next_chunk().unwrap();
+    let chunk = actor.next_chunk(&mut NoGraph).unwrap();
     assert_eq!(
         chunk.header.episode_id.0, 1,
         "episode 0 left nothing to send"
@@ -296,7 +313,7 @@ fn a_physics_failure_on_the_first_step_yields_no_chunk_and_the_next_episode_foll
 #[test]
 fn an_env_that_fails_every_first_step_is_reported_instead_of_looping() {
     let mut actor = failing_actor(0, true);
-    let err = actor.next_chunk().unwrap_err();
+    let err = actor.next_chunk(&mut NoGraph).unwrap_err();
     assert!(matches!(err, ActorError::NoProgress { .. }), "{err}");
 }
 
@@ -336,7 +353,10 @@ fn weights_of_another_policy_set_load_and_change_the_actions() {
         (stats.policy_version, stats.phi_version),
         (PolicyVersion(4), PhiVersion(2))
     );
-    let (a, b) = (plain.next_chunk().unwrap(), loaded.next_chunk().unwrap());
+    let (a, b) = (
+        plain.next_chunk(&mut NoGraph).unwrap(),
+        loaded.next_chunk(&mut NoGraph).unwrap(),
+    );
     let (a, b) = (decode(&a), decode(&b));
     assert_eq!(a[0].obs, b[0].obs, "same env seed, same start");
     assert_ne!(a[0].action, b[0].action);
@@ -346,13 +366,13 @@ fn weights_of_another_policy_set_load_and_change_the_actions() {
 #[test]
 fn a_load_mid_episode_relabels_phi_and_versions_the_following_chunks() {
     let mut actor = Actor::new(&config(30, 100), ActorId(0), 8).unwrap();
-    let first = actor.next_chunk().unwrap();
+    let first = actor.next_chunk(&mut NoGraph).unwrap();
     let (bytes, hash) = foreign_weights(&actor, 5);
     actor
         .load_weights(&header(1, 1, hash, &bytes), &bytes)
         .unwrap();
-    let second = actor.next_chunk().unwrap();
-    let third = actor.next_chunk().unwrap();
+    let second = actor.next_chunk(&mut NoGraph).unwrap();
+    let third = actor.next_chunk(&mut NoGraph).unwrap();
     // The second chunk's first step was acted before the load: its policy version is still 0,
     // but every φ value in it is from the new encoder.
     assert_eq!(
@@ -393,7 +413,10 @@ fn weights_with_a_wrong_hash_version_length_or_content_are_refused_and_change_no
     let config = config(30, 100);
     let mut reference = Actor::new(&config, ActorId(0), 9).unwrap();
     let mut actor = Actor::new(&config, ActorId(0), 9).unwrap();
-    assert_eq!(reference.next_chunk().unwrap(), actor.next_chunk().unwrap());
+    assert_eq!(
+        reference.next_chunk(&mut NoGraph).unwrap(),
+        actor.next_chunk(&mut NoGraph).unwrap()
+    );
     let (bytes, hash) = foreign_weights(&actor, 3);
     let mut old_protocol = header(1, 1, hash, &bytes);
     old_protocol.protocol_version += 1;
@@ -424,7 +447,10 @@ fn weights_with_a_wrong_hash_version_length_or_content_are_refused_and_change_no
     }
     assert_eq!(actor.stats().policy_version, PolicyVersion(0));
     for _ in 0..4 {
-        assert_eq!(reference.next_chunk().unwrap(), actor.next_chunk().unwrap());
+        assert_eq!(
+            reference.next_chunk(&mut NoGraph).unwrap(),
+            actor.next_chunk(&mut NoGraph).unwrap()
+        );
     }
 }
 
@@ -448,6 +474,9 @@ fn weights_holding_nan_are_refused_and_change_nothing() {
         .unwrap_err();
     assert!(err.to_string().contains("low_policy.mean.bias"), "{err}");
     for _ in 0..3 {
-        assert_eq!(reference.next_chunk().unwrap(), actor.next_chunk().unwrap());
+        assert_eq!(
+            reference.next_chunk(&mut NoGraph).unwrap(),
+            actor.next_chunk(&mut NoGraph).unwrap()
+        );
     }
 }

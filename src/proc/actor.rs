@@ -1,15 +1,17 @@
 //! `asi actor`: one rollout process. Steps its environment chunk by chunk, publishes each
 //! chunk, loads new weights when they arrive, and pauses (sleeping on the progress channel)
-//! while the learner's replay-ratio budget is used up (SPEC §6.8).
+//! while the learner's replay-ratio budget is used up (SPEC §6.8). HESS exploration requests and
+//! reaching reports go to the graph-service over the run's `graph` request–response service.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use actor::Actor;
+use actor::{Actor, ActorStats, GraphTransport, ServiceOracle};
 use anyhow::Context;
+use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
 use protocol::{ActorId, ProcessRole, ProgressMessage};
 
 use super::common::{newest_weights, node, MetricsOut, StopWatch};
-use crate::channels::{Channels, WeightsSubscriber};
+use crate::channels::{Channels, GraphClient, WeightsSubscriber};
 use crate::run::RunContext;
 
 /// How long a throttled actor sleeps before re-checking its stop conditions.
@@ -30,11 +32,14 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     let trajectories = channels.trajectory_publisher(&node)?;
     let weights = channels.weights_subscriber(&node)?;
     let progress = channels.progress_subscriber(&node)?;
+    let timeout = Duration::from_millis(config.transport.graph_request_timeout_ms);
+    let mut oracle = ServiceOracle::new(IpcGraph::new(channels.graph_client(&node)?, timeout));
     let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Actor, args.actor_id, config);
     let stop = StopWatch::new();
     let mut latest = ProgressMessage::default();
     let mut published_steps = 0u64;
     let mut published_chunks = 0u64;
+    let mut reach_means = ReachMeans::default();
     let reason = loop {
         if let Some(reason) = stop.should_stop(&node) {
             break reason;
@@ -50,12 +55,15 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             let _ = progress.listener().timed_wait(|_| {}, THROTTLE_WAIT);
             continue;
         }
-        let chunk = actor.next_chunk()?;
+        let chunk = actor.next_chunk(&mut oracle)?;
         trajectories.send(chunk.header, &chunk.records)?;
         published_steps += u64::from(chunk.header.n_steps);
         published_chunks += 1;
         if metrics.due() {
-            metrics.publish(published_steps, &actor_metrics(&actor, published_steps));
+            let mut values = actor_metrics(&actor.stats(), published_steps);
+            values.extend(reach_means.since_last(&actor.stats()));
+            values.push(("actor/graph_unreachable".to_owned(), oracle.transport().n_unreachable as f64));
+            metrics.publish(published_steps, &values);
         }
     };
     tracing::info!(actor = args.actor_id, reason, published_steps, "actor stopping");
@@ -66,7 +74,9 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             "role": "actor", "actor_id": args.actor_id, "incarnation": args.incarnation,
             "published_steps": published_steps, "published_chunks": published_chunks,
             "episodes": stats.episodes, "policy_version": stats.policy_version.0,
-            "weights_rejected": stats.n_weights_rejected, "stop_reason": reason,
+            "weights_rejected": stats.n_weights_rejected, "explore_decisions": stats.n_explore_decisions,
+            "explore_fallbacks": stats.n_explore_fallbacks, "reach_reports": stats.n_reach_reports,
+            "stop_reason": reason,
         }),
     )
 }
@@ -88,13 +98,87 @@ fn load_new_weights(actor: &mut Actor, weights: &WeightsSubscriber) {
     }
 }
 
-fn actor_metrics(actor: &Actor, published_steps: u64) -> Vec<(String, f64)> {
-    let s = actor.stats();
-    vec![
+/// The actor's counters as metrics (names documented in `docs/METRICS.md`); serial mode
+/// writes the same names.
+pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)> {
+    let mut values = vec![
         ("actor/env_steps".to_owned(), published_steps as f64),
         ("actor/episodes".to_owned(), s.episodes as f64),
         ("actor/policy_version".to_owned(), s.policy_version.0 as f64),
         ("actor/last_episode_return".to_owned(), f64::from(s.last_episode_return)),
         ("actor/physics_failures".to_owned(), s.n_physics_failures as f64),
-    ]
+        ("actor/decisions".to_owned(), s.n_decisions as f64),
+        ("actor/explore_decisions".to_owned(), s.n_explore_decisions as f64),
+        ("actor/explore_fallbacks".to_owned(), s.n_explore_fallbacks as f64),
+        ("actor/reach_reports".to_owned(), s.n_reach_reports as f64),
+        ("actor/reach_samples_sent".to_owned(), s.n_reach_samples_sent as f64),
+        ("actor/reach_samples_dropped".to_owned(), s.n_reach_samples_dropped as f64),
+        ("actor/count_prob".to_owned(), f64::from(s.schedule.count_prob)),
+    ];
+    let optional = [
+        ("actor/last_episode_reach_error", s.last_episode_reach_error),
+        ("actor/last_episode_explore_reach_error", s.last_episode_explore_reach_error),
+    ];
+    values.extend(optional.into_iter().filter_map(|(name, v)| Some((name.to_owned(), f64::from(v?)))));
+    values
+}
+
+/// Mean reaching errors over the segments finished since the previous call (the smooth curve of
+/// issue #5); a mean over no segment is left out rather than written as NaN.
+#[derive(Default)]
+pub struct ReachMeans {
+    all: (f64, u64),
+    explore: (f64, u64),
+}
+
+impl ReachMeans {
+    pub fn since_last(&mut self, s: &ActorStats) -> Vec<(String, f64)> {
+        let mut values = Vec::new();
+        let pairs = [
+            ("actor/reach_error", &mut self.all, (s.reach_error_sum, s.n_reach_segments)),
+            ("actor/explore_reach_error", &mut self.explore, (s.explore_reach_error_sum, s.n_explore_reach_segments)),
+        ];
+        for (name, last, now) in pairs {
+            if now.1 > last.1 {
+                values.push((name.to_owned(), (now.0 - last.0) / (now.1 - last.1) as f64));
+            }
+            *last = now;
+        }
+        values
+    }
+}
+
+/// The graph-service over iceoryx2, with the configured timeout. After a call that got no
+/// answer (timeout, transport failure) the service counts as unreachable for one more timeout
+/// period: requests in that time are answered "no answer" at once, so a dead or busy
+/// graph-service costs the actor at most one timeout per period instead of one per decision.
+struct IpcGraph {
+    client: GraphClient,
+    timeout: Duration,
+    unreachable_until: Option<Instant>,
+    /// Calls that got no answer in time or failed in transport.
+    n_unreachable: u64,
+}
+
+impl IpcGraph {
+    fn new(client: GraphClient, timeout: Duration) -> Self {
+        Self { client, timeout, unreachable_until: None, n_unreachable: 0 }
+    }
+}
+
+impl GraphTransport for IpcGraph {
+    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+        if let Some(until) = self.unreachable_until {
+            if Instant::now() < until {
+                return Err("graph-service unreachable (cooling down after a failed request)".to_owned());
+            }
+            self.unreachable_until = None;
+        }
+        self.client.call(*header, body, self.timeout).map_err(|err| {
+            self.n_unreachable += 1;
+            self.unreachable_until = Some(Instant::now() + self.timeout);
+            tracing::warn!("graph request failed, exploring from the policy for {:?}: {err:#}", self.timeout);
+            err.to_string()
+        })
+    }
 }
