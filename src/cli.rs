@@ -25,6 +25,9 @@ pub enum Command {
     /// (spawned by `asi train`) The graph-service process.
     #[command(hide = true, name = "graph-service")]
     GraphService(ChildArgs),
+    /// (spawned by `asi train`) The evaluation process.
+    #[command(hide = true)]
+    Evaluator(ChildArgs),
     /// Measure throughput of a part of the system.
     #[command(subcommand)]
     Bench(BenchCommand),

@@ -48,6 +48,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Learner(args) => proc::learner::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
         Command::GraphService(args) => proc::graph_service::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
+        Command::Evaluator(args) => proc::evaluator::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
         Command::Actor(args) => {
             let ctx = run::RunContext::open(&args.child.run_dir, &args.child.run_id)?;
             proc::actor::run(&ctx, &proc::actor::ActorArgs { actor_id: args.actor_id, incarnation: args.incarnation })

@@ -21,6 +21,7 @@ pub enum ChildKind {
     GraphService,
     Learner,
     Actor(u32),
+    Evaluator,
 }
 
 impl ChildKind {
@@ -29,7 +30,13 @@ impl ChildKind {
             ChildKind::GraphService => "graph-service".to_owned(),
             ChildKind::Learner => "learner".to_owned(),
             ChildKind::Actor(id) => format!("actor-{id}"),
+            ChildKind::Evaluator => "evaluator".to_owned(),
         }
+    }
+
+    /// Actors and the evaluator hold no state worth keeping: a crashed one is restarted.
+    pub fn restartable(self) -> bool {
+        matches!(self, ChildKind::Actor(_) | ChildKind::Evaluator)
     }
 }
 
@@ -78,6 +85,7 @@ impl Children {
             ChildKind::Actor(id) => {
                 command.args(["actor", "--actor-id", &id.to_string(), "--incarnation", &incarnation.to_string()])
             }
+            ChildKind::Evaluator => command.arg("evaluator"),
         };
         command
             .arg("--run-dir")
@@ -98,7 +106,7 @@ impl Children {
     /// here: their state would be lost; checkpoint-based restarts come with resume).
     pub fn check_services(&mut self) -> anyhow::Result<Option<String>> {
         for child in &mut self.children {
-            if matches!(child.kind, ChildKind::Actor(_)) {
+            if child.kind.restartable() {
                 continue;
             }
             if let Some(process) = &mut child.process {
@@ -114,12 +122,13 @@ impl Children {
         Ok(None)
     }
 
-    /// Restarts actors that have exited, each after a back-off that doubles per crash.
+    /// Restarts actors (and the evaluator) that have exited, each after a back-off that
+    /// doubles per crash.
     pub fn restart_crashed_actors(&mut self) -> anyhow::Result<()> {
         let now = Instant::now();
         for i in 0..self.children.len() {
             let kind = self.children[i].kind;
-            if !matches!(kind, ChildKind::Actor(_)) {
+            if !kind.restartable() {
                 continue;
             }
             if let Some(process) = &mut self.children[i].process {

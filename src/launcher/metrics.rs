@@ -15,7 +15,7 @@ use crate::run::RunContext;
 use crate::tensorboard::EventWriter;
 
 /// Headline columns of `metrics.csv`, each the key of a value in the book.
-const CSV_COLUMNS: [&str; 7] = [
+const CSV_COLUMNS: [&str; 9] = [
     "learner/ingest/env_steps",
     "learner/ingest/episodes_completed",
     "learner/charts/updates_low",
@@ -23,6 +23,8 @@ const CSV_COLUMNS: [&str; 7] = [
     "learner/charts/policy_version",
     "learner/ingest/lost_chunks",
     "graph-service/graph/stored_steps",
+    "evaluator0/eval/success_rate",
+    "evaluator0/eval/train_episodes",
 ];
 /// How often a plain progress line is logged when stderr is not a terminal.
 const PLAIN_PROGRESS_INTERVAL: Duration = Duration::from_secs(10);
@@ -84,10 +86,14 @@ impl MetricsBook {
 
     pub fn show_progress(&mut self, restarts: u64) {
         let line = format!(
-            "env steps {} | {:.0} steps/s | episodes {} | eval success - | policy v{} | restarts {restarts}",
+            "env steps {} | {:.0} steps/s | episodes {} | eval success {} | policy v{} | restarts {restarts}",
             self.get("learner/ingest/env_steps") as u64,
             self.rate.per_sec(),
             self.get("learner/ingest/episodes_completed") as u64,
+            match self.values.get("evaluator0/eval/success_rate") {
+                Some(rate) => format!("{:.0}%", rate * 100.0),
+                None => "-".to_owned(),
+            },
             self.get("learner/charts/policy_version") as u64,
         );
         if self.bar.is_hidden() {

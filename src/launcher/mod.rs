@@ -51,6 +51,9 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     for id in 0..config.run.n_actors as u32 {
         children.spawn(ChildKind::Actor(id))?;
     }
+    if config.eval.n_episodes > 0 {
+        children.spawn(ChildKind::Evaluator)?;
+    }
     tracing::info!(run_id = %ctx.run_id, run_dir = %ctx.run_dir.display(), actors = config.run.n_actors, "training started");
     let ending = supervise(&ctx, &node, &metrics_in, &mut children, &mut book);
     shutdown(&control, &mut children);
@@ -120,7 +123,7 @@ fn supervise(
 /// Actors first (so everything they sent can be drained), then the services: a Stop message,
 /// and SIGTERM for any that has not exited after [`SERVICE_STOP_WAIT`].
 fn shutdown(control: &protocol::transport::ValuePublisher<ControlMessage>, children: &mut Children) {
-    children.stop_kind(|k| matches!(k, ChildKind::Actor(_)));
+    children.stop_kind(|k| k.restartable());
     if let Err(err) = control.send(ControlMessage::new(1, ControlCommand::Stop)) {
         tracing::warn!("could not send Stop: {err:#}");
     }

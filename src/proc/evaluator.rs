@@ -1,0 +1,166 @@
+//! `asi evaluator`: the evaluation process (SPEC §7). It listens to the weights broadcast and,
+//! each time the learner's count of completed training episodes (`WeightsHeader.schedule`)
+//! passes the next multiple of `eval.interval_episodes`, evaluates the weights of that message:
+//! `eval.n_episodes` deterministic episodes on the task's test goal. Each result is published as
+//! metrics (`evaluator0/eval/*`, see docs/METRICS.md), appended to `run_dir/eval.jsonl`, and
+//! drawn as `run_dir/plots/eval_latest.png` (the maze with every evaluation trajectory).
+//!
+//! An evaluation is done on the newest weights at the moment it falls due; when the learner
+//! crosses several multiples at once (a slow evaluator), the skipped ones are counted, not
+//! queued, so evaluation never holds training back.
+
+use std::fs::OpenOptions;
+use std::io::Write;
+use std::time::Duration;
+
+use actor::eval::{EvalReport, Evaluator};
+use anyhow::Context;
+use protocol::{ProcessRole, WeightsHeader};
+
+use super::common::{newest_weights, node, task_info, MetricsOut, StopWatch};
+use crate::channels::Channels;
+use crate::run::RunContext;
+
+/// How long one wait for weights lasts before the stop conditions are re-checked.
+const WEIGHTS_WAIT: Duration = Duration::from_millis(200);
+
+/// Which evaluations are due: evaluation `k` (1, 2, …) falls due once the learner has
+/// completed `k × interval` training episodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EvalSchedule {
+    interval: u64,
+    done: u64,
+    skipped: u64,
+}
+
+impl EvalSchedule {
+    pub fn new(interval: u64) -> Self {
+        Self { interval: interval.max(1), done: 0, skipped: 0 }
+    }
+
+    /// The index of the evaluation to run now for `train_episodes`, if one is due; marks it
+    /// done and counts any multiples crossed in between as skipped.
+    pub fn due(&mut self, train_episodes: u64) -> Option<u64> {
+        let reached = train_episodes / self.interval;
+        if reached <= self.done {
+            return None;
+        }
+        self.skipped += reached - self.done - 1;
+        self.done = reached;
+        Some(reached)
+    }
+
+    pub fn skipped(&self) -> u64 {
+        self.skipped
+    }
+}
+
+pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
+    let config = &ctx.config;
+    let info = task_info(config)?;
+    let mut evaluator = Evaluator::new(config, config.run.seed ^ 0xE7A1).context("building the evaluator")?;
+    let node = node(ctx, "evaluator")?;
+    let channels = Channels::new(config, &ctx.run_id, &info.layout);
+    let weights = channels.weights_subscriber(&node)?;
+    let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Evaluator, 0, config);
+    let stop = StopWatch::new();
+    let mut schedule = EvalSchedule::new(config.eval.interval_episodes);
+    let plots = ctx.run_dir.join("plots");
+    std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+    let mut n_rejected = 0u64;
+    let reason = loop {
+        if let Some(reason) = stop.should_stop(&node) {
+            break reason;
+        }
+        let Some((header, bytes)) = newest_weights(&weights) else {
+            // Interrupted waits (termination signal) are caught by the stop check.
+            let _ = weights.listener().timed_wait(|_| {}, WEIGHTS_WAIT);
+            continue;
+        };
+        let Some(index) = schedule.due(header.schedule.train_episodes) else {
+            continue;
+        };
+        if let Err(err) = evaluator.load_weights(&header, &bytes) {
+            n_rejected += 1;
+            tracing::error!("evaluator refused weights: {err:#}");
+            continue;
+        }
+        let report = evaluator.run(index, config.eval.n_episodes)?;
+        tracing::info!(
+            index,
+            train_episodes = header.schedule.train_episodes,
+            success_rate = report.success_rate,
+            policy_version = report.policy_version.0,
+            "evaluation"
+        );
+        metrics.publish(0, &eval_metrics(&report, &header, schedule.skipped(), n_rejected));
+        append_report(ctx, &report, &header)?;
+        if let Some(maze) = evaluator.maze() {
+            let path = plots.join("eval_latest.png");
+            let all: Vec<[f32; 2]> = report.trajectories.iter().flatten().copied().collect();
+            let goal = report.goals.first().copied().unwrap_or([f32::NAN; 2]);
+            if let Err(err) = envs::render::render_maze_png(maze, &all, goal, &path) {
+                tracing::warn!("evaluation picture not drawn: {err}");
+            }
+        }
+    };
+    tracing::info!(reason, evaluations = schedule.done, skipped = schedule.skipped(), "evaluator stopping");
+    ctx.write_status(
+        "evaluator",
+        &serde_json::json!({
+            "role": "evaluator", "evaluations": schedule.done, "skipped": schedule.skipped(),
+            "weights_rejected": n_rejected, "stop_reason": reason,
+        }),
+    )
+}
+
+fn eval_metrics(report: &EvalReport, header: &WeightsHeader, skipped: u64, rejected: u64) -> Vec<(String, f64)> {
+    vec![
+        ("eval/success_rate".to_owned(), report.success_rate),
+        ("eval/mean_final_distance".to_owned(), report.mean_final_distance),
+        ("eval/mean_length".to_owned(), report.mean_length),
+        ("eval/mean_return".to_owned(), report.mean_return),
+        ("eval/index".to_owned(), report.index as f64),
+        ("eval/train_episodes".to_owned(), header.schedule.train_episodes as f64),
+        ("eval/policy_version".to_owned(), report.policy_version.0 as f64),
+        ("eval/skipped".to_owned(), skipped as f64),
+        ("eval/weights_rejected".to_owned(), rejected as f64),
+    ]
+}
+
+/// One JSON line per evaluation in `run_dir/eval.jsonl`.
+fn append_report(ctx: &RunContext, report: &EvalReport, header: &WeightsHeader) -> anyhow::Result<()> {
+    let path = ctx.run_dir.join("eval.jsonl");
+    let mut file = OpenOptions::new().create(true).append(true).open(&path).with_context(|| format!("opening {}", path.display()))?;
+    let line = serde_json::json!({
+        "index": report.index,
+        "train_episodes": header.schedule.train_episodes,
+        "policy_version": report.policy_version.0,
+        "phi_version": report.phi_version.0,
+        "n_episodes": report.n_episodes,
+        "success_rate": report.success_rate,
+        "mean_final_distance": report.mean_final_distance,
+        "mean_length": report.mean_length,
+        "mean_return": report.mean_return,
+    });
+    writeln!(file, "{line}").with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn evaluations_fall_due_at_multiples_and_count_skips() {
+        let mut s = EvalSchedule::new(50);
+        assert_eq!(s.due(0), None);
+        assert_eq!(s.due(49), None);
+        assert_eq!(s.due(50), Some(1));
+        assert_eq!(s.due(50), None);
+        assert_eq!(s.due(99), None);
+        assert_eq!(s.due(100), Some(2));
+        assert_eq!(s.due(260), Some(5));
+        assert_eq!(s.skipped(), 2);
+        assert_eq!(s.due(260), None);
+    }
+}
