@@ -8,6 +8,7 @@ use crate::cli::{BenchCommand, BenchEnvArgs};
 pub fn run(command: BenchCommand) -> anyhow::Result<()> {
     match command {
         BenchCommand::Env(args) => bench_env(&args),
+        BenchCommand::Graph(args) => crate::bench_graph::run(&args),
     }
 }
 

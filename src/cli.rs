@@ -33,6 +33,9 @@ pub enum Command {
     Bench(BenchCommand),
     /// List the registered task names.
     Tasks,
+    /// Learning curves of several runs on one PNG: runs grouped into arms by name without the
+    /// seed tag, mean over seeds with a 95 % confidence band, x axis env steps.
+    Plot(PlotArgs),
     /// Query the live graph-service of a running training run.
     Graph(GraphArgs),
 }
@@ -104,6 +107,24 @@ pub struct ActorArgs {
     /// How many times the launcher restarted this actor.
     #[arg(long, default_value_t = 0)]
     pub incarnation: u32,
+}
+
+#[derive(Debug, Args)]
+pub struct PlotArgs {
+    /// Run directories (each with a metrics.jsonl). Seeds of one setting are recognised by a
+    /// trailing `_seed-N`, `-seedN` or `_sN` in the directory name and averaged.
+    #[arg(required = true, num_args = 1..)]
+    pub run_dirs: Vec<std::path::PathBuf>,
+    /// Output PNG file.
+    #[arg(long, default_value = "plot.png")]
+    pub out: std::path::PathBuf,
+    /// Metric key to plot, one panel each (repeatable). Default: test success rate
+    /// (`evaluator0/eval/success_rate`) and coverage (`learner/charts/coverage`).
+    #[arg(long)]
+    pub metric: Vec<String>,
+    /// Metric key of the x axis.
+    #[arg(long, default_value = crate::plot::DEFAULT_X)]
+    pub x: String,
 }
 
 #[derive(Debug, Args)]

@@ -6,6 +6,7 @@ mod channels;
 mod cli;
 mod graph_tool;
 mod launcher;
+mod plot;
 mod proc;
 mod run;
 mod serial;
@@ -55,6 +56,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Bench(args) => bench::run(args),
         Command::Graph(args) => graph_tool::run(&args),
+        Command::Plot(args) => plot::run(&args),
         Command::Tasks => {
             for name in envs::registry::task_names() {
                 println!("{name}");

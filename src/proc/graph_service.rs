@@ -94,5 +94,13 @@ fn graph_metrics(stats: &graph_service::GraphStats) -> Vec<(String, f64)> {
         ("graph/nodes".to_owned(), stats.n_nodes as f64),
         ("graph/edges".to_owned(), stats.n_edges as f64),
         ("graph/version".to_owned(), stats.graph_version as f64),
+        ("graph/requests".to_owned(), stats.requests as f64),
+        ("graph/invalid_requests".to_owned(), stats.invalid_requests as f64),
+        ("graph/frontier_not_found".to_owned(), stats.frontier_not_found as f64),
+        ("graph/routes_not_found".to_owned(), stats.routes_not_found as f64),
+        ("graph/explore_answers".to_owned(), stats.explore_answers as f64),
+        ("graph/hess_visited_cells".to_owned(), stats.hess_visited_cells as f64),
+        ("graph/future_count_recomputes".to_owned(), stats.future_count_recomputes as f64),
+        ("graph/reach_samples".to_owned(), stats.reach_samples as f64),
     ]
 }

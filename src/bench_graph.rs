@@ -1,0 +1,191 @@
+//! `asi bench graph`: graph-service speed on synthetic trajectories ([`graph_service::bench`]).
+//!
+//! Prints, as `name: value` lines: the rebuild time for each store size (φ re-mapping with
+//! batched candle inference, graph construction, visit/future-count recount — timed
+//! separately), route query latency p50/p99 on the graph of the first size (capped at
+//! `graph.max_nodes` = 5,000 nodes), the time of all-pairs shortest paths (Dijkstra from every
+//! node) on that graph, and the same measurements by scipy (`scripts/bench_graph_scipy.py`,
+//! which installs scipy into its own venv) on the same graph and queries, with ratios. Without
+//! `python3` (or with `--no-python`) the scipy side is skipped with a message.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use clap::Args;
+use graph_service::bench::{quantile, random_phi, synthetic_store, time_rebuild, time_routes, RouteSample};
+use graph_service::dijkstra::shortest_paths;
+use graph_service::LatentGraph;
+use protocol::Config;
+
+/// Observation size of the synthetic states (the Ant's).
+const OBS_DIM: usize = 29;
+/// Script of the scipy side, relative to the repository root.
+const SCIPY_SCRIPT: &str = "scripts/bench_graph_scipy.py";
+
+#[derive(Debug, Args)]
+pub struct BenchGraphArgs {
+    /// Store sizes to rebuild, in stored steps, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1000000,10000000")]
+    pub sizes: Vec<u64>,
+    /// Env steps per synthetic episode (each stores one more state).
+    #[arg(long, default_value_t = 500)]
+    pub episode_len: usize,
+    /// Route queries timed (random node pairs).
+    #[arg(long, default_value_t = 2000)]
+    pub queries: usize,
+    /// Seed of the synthetic walks, φ's initialisation and the query pairs.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Skip the scipy comparison.
+    #[arg(long)]
+    pub no_python: bool,
+}
+
+pub fn run(args: &BenchGraphArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(!args.sizes.is_empty() && args.sizes.iter().all(|&s| s > 0), "--sizes must list positive step counts");
+    anyhow::ensure!(args.episode_len > 0 && args.queries > 0, "--episode-len and --queries must be positive");
+    let config = Config::default();
+    println!("obs_dim: {OBS_DIM}");
+    println!("max_nodes: {}", config.graph.max_nodes);
+    let mut route_graph = None;
+    for &size in &args.sizes {
+        let graph = rebuild(&config, size, args)?;
+        route_graph.get_or_insert(graph);
+    }
+    let graph = route_graph.context("no store size measured")?;
+    let samples = time_routes(&graph, args.queries, args.seed);
+    let ours = report_routes(&graph, &samples)?;
+    if args.no_python {
+        println!("scipy: skipped (--no-python)");
+        return Ok(());
+    }
+    compare_with_scipy(&graph, &samples, &ours)
+}
+
+/// Builds a store of `size` steps, times its rebuild, prints the figures; returns the graph.
+fn rebuild(config: &Config, size: u64, args: &BenchGraphArgs) -> anyhow::Result<LatentGraph> {
+    let label = size_label(size);
+    let start = Instant::now();
+    let store = synthetic_store(config, OBS_DIM, size, args.episode_len, args.seed);
+    println!("rebuild_{label}_generate_secs: {:.3}", start.elapsed().as_secs_f64());
+    let phi = random_phi(config, OBS_DIM, args.seed)?;
+    let (timing, graph) = time_rebuild(config, &store, &phi)?;
+    println!("rebuild_{label}_stored_steps: {}", timing.n_steps);
+    println!("rebuild_{label}_nodes: {}", timing.n_nodes);
+    println!("rebuild_{label}_edges: {}", timing.n_edges);
+    println!("rebuild_{label}_phi_map_secs: {:.3}", timing.map_secs);
+    println!("rebuild_{label}_graph_build_secs: {:.3}", timing.build_secs);
+    println!("rebuild_{label}_counts_secs: {:.3}", timing.counts_secs);
+    println!("rebuild_{label}_total_secs: {:.3}", timing.map_secs + timing.build_secs + timing.counts_secs);
+    Ok(graph)
+}
+
+/// `1M`, `10M`, `250k`, or the plain number.
+fn size_label(size: u64) -> String {
+    match size {
+        s if s % 1_000_000 == 0 => format!("{}M", s / 1_000_000),
+        s if s % 1_000 == 0 => format!("{}k", s / 1_000),
+        s => s.to_string(),
+    }
+}
+
+/// Our route and all-pairs figures.
+struct Ours {
+    p50_us: f64,
+    p99_us: f64,
+    all_pairs_secs: f64,
+}
+
+fn report_routes(graph: &LatentGraph, samples: &[RouteSample]) -> anyhow::Result<Ours> {
+    let micros: Vec<f64> = samples.iter().map(|s| s.secs * 1e6).collect();
+    let (Some(p50_us), Some(p99_us)) = (quantile(&micros, 0.5), quantile(&micros, 0.99)) else {
+        bail!("no route query was timed (empty graph?)");
+    };
+    let start = Instant::now();
+    let mut reachable_pairs = 0usize;
+    for source in 0..graph.n_nodes() as u32 {
+        reachable_pairs += shortest_paths(graph.adjacency(), source).distances().iter().flatten().count();
+    }
+    let all_pairs_secs = start.elapsed().as_secs_f64();
+    println!("route_nodes: {}", graph.n_nodes());
+    println!("route_edges: {}", graph.n_edges());
+    println!("route_queries: {}", samples.len());
+    println!("route_reachable_queries: {}", samples.iter().filter(|s| s.distance.is_some()).count());
+    println!("route_p50_us: {p50_us:.1}");
+    println!("route_p99_us: {p99_us:.1}");
+    println!("all_pairs_reachable_pairs: {reachable_pairs}");
+    println!("all_pairs_secs: {all_pairs_secs:.3}");
+    Ok(Ours { p50_us, p99_us, all_pairs_secs })
+}
+
+/// Runs the scipy script on the same graph and queries and prints its figures and the ratios.
+fn compare_with_scipy(graph: &LatentGraph, samples: &[RouteSample], ours: &Ours) -> anyhow::Result<()> {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join(SCIPY_SCRIPT);
+    if Command::new("python3").arg("--version").output().is_err() {
+        println!("scipy: skipped (python3 not found on PATH; install Python 3 to compare with scipy)");
+        return Ok(());
+    }
+    let dir = temp_dir()?;
+    let result = write_inputs(&dir, graph, samples).and_then(|()| run_script(&script, &dir));
+    let _ = std::fs::remove_dir_all(&dir);
+    let scipy = match result {
+        Ok(scipy) => scipy,
+        Err(err) => {
+            println!("scipy: skipped ({err:#})");
+            return Ok(());
+        }
+    };
+    let field = |key: &str| scipy.get(key).and_then(serde_json::Value::as_f64).with_context(|| format!("`{key}` missing in {scipy}"));
+    let (p50, p99, all_pairs) = (field("p50_us")?, field("p99_us")?, field("all_pairs_secs")?);
+    println!("scipy_version: {}", scipy.get("scipy_version").and_then(serde_json::Value::as_str).unwrap_or("?"));
+    println!("scipy_distances_agree: {}", scipy.get("distances_agree").and_then(serde_json::Value::as_bool).unwrap_or(false));
+    println!("scipy_route_p50_us: {p50:.1}");
+    println!("scipy_route_p99_us: {p99:.1}");
+    println!("scipy_all_pairs_secs: {all_pairs:.3}");
+    println!("route_p50_ratio_scipy_over_ours: {:.2}", p50 / ours.p50_us);
+    println!("route_p99_ratio_scipy_over_ours: {:.2}", p99 / ours.p99_us);
+    println!("all_pairs_ratio_scipy_over_ours: {:.2}", all_pairs / ours.all_pairs_secs);
+    Ok(())
+}
+
+fn temp_dir() -> anyhow::Result<PathBuf> {
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_nanos();
+    let dir = std::env::temp_dir().join(format!("asi-bench-graph-{}-{nanos}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    Ok(dir)
+}
+
+/// `edges.txt`: `n_nodes` then `a b weight` lines; `queries.txt`: `from to distance` lines
+/// (distance −1 when unreachable), our answers, which the script checks.
+fn write_inputs(dir: &Path, graph: &LatentGraph, samples: &[RouteSample]) -> anyhow::Result<()> {
+    let mut edges = format!("{}\n", graph.n_nodes());
+    for &(a, b, w) in graph.edges() {
+        edges.push_str(&format!("{a} {b} {w}\n"));
+    }
+    std::fs::write(dir.join("edges.txt"), edges)?;
+    let queries: String = samples
+        .iter()
+        .map(|s| format!("{} {} {}\n", s.from, s.to, s.distance.map_or(-1, |d| d as i64)))
+        .collect();
+    std::fs::write(dir.join("queries.txt"), queries)?;
+    Ok(())
+}
+
+/// Runs the script; its last stdout line is a JSON object of figures.
+fn run_script(script: &Path, dir: &Path) -> anyhow::Result<serde_json::Value> {
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(dir)
+        .output()
+        .with_context(|| format!("running {}", script.display()))?;
+    if !out.status.success() {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let tail: Vec<&str> = stderr.lines().rev().take(5).collect();
+        bail!("{} failed ({}): {}", script.display(), out.status, tail.into_iter().rev().collect::<Vec<_>>().join(" | "));
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let last = stdout.lines().last().context("the scipy script printed nothing")?;
+    serde_json::from_str(last).with_context(|| format!("parsing the scipy script's output {last:?}"))
+}

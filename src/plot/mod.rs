@@ -1,0 +1,434 @@
+//! `asi plot`: learning curves of several runs on one figure, as the paper reports them — runs
+//! grouped into arms (seeds of one setting), each arm's mean over seeds with a 95 % confidence
+//! band (Student t over seeds), x axis env steps — one panel per metric, as a PNG.
+//!
+//! Data: each run directory's `metrics.jsonl` (one object per launcher flush). A curve is the
+//! metric against the x key (default `learner/ingest/env_steps`), lines missing either key
+//! skipped. Arms: a run directory's name with a trailing seed tag removed (`…_seed-3`,
+//! `…-seed3`, `…_s3`), so `u-asi_seed-0` and `u-asi_seed-1` form the arm `u-asi`.
+//! Aggregation: every seed's curve is linearly interpolated onto a common grid from 0 to the
+//! smallest final x among the arm's seeds (no extrapolation), then mean and
+//! `t(0.975, n−1) · sd / √n` per grid point.
+//!
+//! Also used by the launcher to keep `run_dir/plots/curves.png` current during a run.
+
+pub mod font;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use plotters::prelude::*;
+
+/// Default x axis: env steps ingested by the learner.
+pub const DEFAULT_X: &str = "learner/ingest/env_steps";
+/// Default metrics: test-goal success rate and xy coverage.
+pub const DEFAULT_METRICS: [&str; 2] = ["evaluator0/eval/success_rate", "learner/charts/coverage"];
+/// Points of the common grid an arm's seeds are interpolated onto.
+const GRID_POINTS: usize = 200;
+
+/// One run's curve of one metric.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+}
+
+/// An arm's aggregate on a grid: mean and confidence half-width (0 with one seed).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Band {
+    pub x: Vec<f64>,
+    pub mean: Vec<f64>,
+    pub half_width: Vec<f64>,
+    pub n_seeds: usize,
+}
+
+/// Reads `metric` against `x_key` from `run_dir/metrics.jsonl`. Points are kept in file order
+/// with x non-decreasing (a point whose x goes back is dropped) and the last value kept for
+/// repeated x; non-finite values are skipped.
+pub fn read_series(run_dir: &Path, x_key: &str, metric: &str) -> anyhow::Result<Series> {
+    let path = run_dir.join("metrics.jsonl");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut series = Series { x: Vec::new(), y: Vec::new() };
+    for (i, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let value: serde_json::Value =
+            serde_json::from_str(line).with_context(|| format!("{}: line {} is not JSON", path.display(), i + 1))?;
+        let (Some(x), Some(y)) = (value.get(x_key).and_then(|v| v.as_f64()), value.get(metric).and_then(|v| v.as_f64()))
+        else {
+            continue;
+        };
+        if !(x.is_finite() && y.is_finite()) {
+            continue;
+        }
+        match series.x.last() {
+            Some(&last) if x < last => continue,
+            Some(&last) if x == last => *series.y.last_mut().expect("same length") = y,
+            _ => {
+                series.x.push(x);
+                series.y.push(y);
+            }
+        }
+    }
+    Ok(series)
+}
+
+/// The arm of a run directory: its name without a trailing seed tag.
+pub fn arm_name(run_dir: &Path) -> String {
+    let name = run_dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| run_dir.display().to_string());
+    let digits = name.len() - name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+    if digits == 0 {
+        return name;
+    }
+    let stem = &name[..name.len() - digits];
+    for tag in ["_seed-", "-seed-", "_seed", "-seed", "_s", "-s"] {
+        if let Some(arm) = stem.strip_suffix(tag) {
+            if !arm.is_empty() {
+                return arm.to_owned();
+            }
+        }
+    }
+    name
+}
+
+/// Linear interpolation of `s` at `x` (`None` outside its range).
+fn interpolate(s: &Series, x: f64) -> Option<f64> {
+    let (first, last) = (*s.x.first()?, *s.x.last()?);
+    if x < first || x > last {
+        return None;
+    }
+    let i = s.x.partition_point(|&v| v < x);
+    if s.x[i] == x {
+        return Some(s.y[i]);
+    }
+    let (x0, x1, y0, y1) = (s.x[i - 1], s.x[i], s.y[i - 1], s.y[i]);
+    Some(y0 + (y1 - y0) * (x - x0) / (x1 - x0))
+}
+
+/// Two-sided 95 % Student t quantile for `df` degrees of freedom.
+pub fn t_975(df: usize) -> f64 {
+    const TABLE: [f64; 30] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
+        2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
+    ];
+    match df {
+        0 => f64::NAN,
+        1..=30 => TABLE[df - 1],
+        _ => 1.96,
+    }
+}
+
+/// Mean and 95 % band of the seeds' curves on a common grid (see the module doc).
+pub fn aggregate(seeds: &[Series]) -> Option<Band> {
+    let seeds: Vec<&Series> = seeds.iter().filter(|s| !s.x.is_empty()).collect();
+    let start = seeds.iter().map(|s| s.x[0]).fold(f64::NEG_INFINITY, f64::max);
+    let end = seeds.iter().map(|s| *s.x.last().expect("non-empty")).fold(f64::INFINITY, f64::min);
+    if seeds.is_empty() || end < start {
+        return None;
+    }
+    let n = seeds.len();
+    let steps = if end > start { GRID_POINTS } else { 1 };
+    let mut band = Band { x: Vec::new(), mean: Vec::new(), half_width: Vec::new(), n_seeds: n };
+    for k in 0..steps {
+        let x = if steps == 1 { start } else { start + (end - start) * k as f64 / (steps - 1) as f64 };
+        let ys: Vec<f64> = seeds.iter().filter_map(|s| interpolate(s, x)).collect();
+        let mean = ys.iter().sum::<f64>() / ys.len() as f64;
+        let half = if ys.len() > 1 {
+            let var = ys.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (ys.len() - 1) as f64;
+            t_975(ys.len() - 1) * (var / ys.len() as f64).sqrt()
+        } else {
+            0.0
+        };
+        band.x.push(x);
+        band.mean.push(mean);
+        band.half_width.push(half);
+    }
+    Some(band)
+}
+
+/// Arms in order of first appearance, each with its bands per metric.
+pub struct Figure {
+    pub metrics: Vec<String>,
+    pub x_key: String,
+    /// `(arm, bands per metric (None when no seed has the metric))`.
+    pub arms: Vec<(String, Vec<Option<Band>>)>,
+}
+
+/// Reads every run and aggregates it per arm and metric.
+pub fn build_figure(run_dirs: &[PathBuf], x_key: &str, metrics: &[String]) -> anyhow::Result<Figure> {
+    if run_dirs.is_empty() {
+        bail!("no run directories given");
+    }
+    let mut order: Vec<String> = Vec::new();
+    let mut by_arm: BTreeMap<String, Vec<&PathBuf>> = BTreeMap::new();
+    for dir in run_dirs {
+        let arm = arm_name(dir);
+        if !by_arm.contains_key(&arm) {
+            order.push(arm.clone());
+        }
+        by_arm.entry(arm).or_default().push(dir);
+    }
+    let mut arms = Vec::new();
+    for arm in order {
+        let mut bands = Vec::new();
+        for metric in metrics {
+            let series = by_arm[&arm].iter().map(|d| read_series(d, x_key, metric)).collect::<anyhow::Result<Vec<_>>>()?;
+            bands.push(aggregate(&series));
+        }
+        arms.push((arm, bands));
+    }
+    Ok(Figure { metrics: metrics.to_vec(), x_key: x_key.to_owned(), arms })
+}
+
+const PANEL_W: u32 = 900;
+const PANEL_H: u32 = 380;
+const MARGIN_L: i32 = 80;
+const MARGIN_R: i32 = 20;
+const MARGIN_T: i32 = 40;
+const MARGIN_B: i32 = 60;
+const TEXT: RGBColor = RGBColor(30, 30, 30);
+const GRID: RGBColor = RGBColor(225, 225, 225);
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+/// "Nice" tick values covering `[lo, hi]` (1, 2, 5 × 10^k steps, about `n` of them).
+pub fn ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
+        return vec![lo];
+    }
+    let raw = (hi - lo) / n.max(1) as f64;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * mag).find(|s| *s >= raw).unwrap_or(10.0 * mag);
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).collect()
+}
+
+/// A short label: 1500000 → "1.5M", 0.25 → "0.25".
+pub fn format_tick(v: f64) -> String {
+    let a = v.abs();
+    let (scaled, suffix) = if a >= 1e6 { (v / 1e6, "M") } else if a >= 1e3 { (v / 1e3, "K") } else { (v, "") };
+    let text = format!("{scaled:.2}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    format!("{}{suffix}", if text == "-0" { "0" } else { text })
+}
+
+/// Draws `figure` as a PNG at `out`.
+pub fn render_png(figure: &Figure, out: &Path) -> anyhow::Result<()> {
+    let n_panels = figure.metrics.len().max(1) as u32;
+    let root = BitMapBackend::new(out, (PANEL_W, PANEL_H * n_panels)).into_drawing_area();
+    let fail = |e: &dyn std::fmt::Display| anyhow::anyhow!("drawing {}: {e}", out.display());
+    root.fill(&WHITE).map_err(|e| fail(&e))?;
+    for (p, metric) in figure.metrics.iter().enumerate() {
+        let top = (p as u32 * PANEL_H) as i32;
+        draw_panel(&root, figure, p, metric, top).map_err(|e| fail(&e))?;
+    }
+    root.present().map_err(|e| fail(&e))
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+type DrawResult<'a> = Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
+
+fn text<'a>(root: &Area<'a>, s: &str, x: i32, y: i32, scale: u32, color: &RGBColor) -> DrawResult<'a> {
+    let mut result = Ok(());
+    font::for_each_pixel(s, x, y, scale, |px, py| {
+        if result.is_ok() {
+            result = root.draw_pixel((px, py), color);
+        }
+    });
+    result
+}
+
+fn draw_panel<'a>(root: &Area<'a>, figure: &Figure, p: usize, metric: &str, top: i32) -> DrawResult<'a> {
+    let bands: Vec<(usize, &Band)> =
+        figure.arms.iter().enumerate().filter_map(|(i, (_, bands))| bands[p].as_ref().map(|b| (i, b))).collect();
+    let (left, right) = (MARGIN_L, PANEL_W as i32 - MARGIN_R);
+    let (upper, lower) = (top + MARGIN_T, top + PANEL_H as i32 - MARGIN_B);
+    text(root, metric, left, top + 12, 2, &TEXT)?;
+    if bands.is_empty() {
+        return text(root, "no data", left + 20, upper + 40, 2, &TEXT);
+    }
+    let x_max = bands.iter().map(|(_, b)| *b.x.last().expect("non-empty")).fold(0.0f64, f64::max).max(1.0);
+    let x_min = bands.iter().map(|(_, b)| b.x[0]).fold(f64::INFINITY, f64::min).min(0.0);
+    let lows = bands.iter().flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m - h));
+    let highs = bands.iter().flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m + h));
+    let (mut y_min, mut y_max) = (lows.fold(f64::INFINITY, f64::min).min(0.0), highs.fold(f64::NEG_INFINITY, f64::max));
+    if y_max <= y_min {
+        y_max = y_min + 1.0;
+    }
+    let pad = 0.05 * (y_max - y_min);
+    y_max += pad;
+    if y_min < 0.0 {
+        y_min -= pad;
+    }
+    let px = |x: f64| left + ((x - x_min) / (x_max - x_min) * f64::from(right - left)).round() as i32;
+    let py = |y: f64| lower - ((y - y_min) / (y_max - y_min) * f64::from(lower - upper)).round() as i32;
+    for t in ticks(y_min, y_max, 5) {
+        root.draw(&PathElement::new(vec![(left, py(t)), (right, py(t))], GRID))?;
+        let label = format_tick(t);
+        text(root, &label, left - 8 - 2 * font::text_width(&label) as i32, py(t) - font::GLYPH_H as i32, 2, &TEXT)?;
+    }
+    for t in ticks(x_min, x_max, 6) {
+        root.draw(&PathElement::new(vec![(px(t), upper), (px(t), lower)], GRID))?;
+        let label = format_tick(t);
+        text(root, &label, px(t) - font::text_width(&label) as i32, lower + 8, 2, &TEXT)?;
+    }
+    root.draw(&Rectangle::new([(left, upper), (right, lower)], TEXT))?;
+    let x_label = format!("{} ->", figure.x_key);
+    text(root, &x_label, right - 2 * font::text_width(&x_label) as i32, lower + 32, 2, &TEXT)?;
+    for &(i, band) in &bands {
+        let color = PALETTE[i % PALETTE.len()];
+        if band.n_seeds > 1 {
+            let mut polygon: Vec<(i32, i32)> =
+                band.x.iter().zip(&band.mean).zip(&band.half_width).map(|((x, m), h)| (px(*x), py(m + h))).collect();
+            polygon.extend(band.x.iter().zip(&band.mean).zip(&band.half_width).rev().map(|((x, m), h)| (px(*x), py(m - h))));
+            root.draw(&Polygon::new(polygon, color.mix(0.2).filled()))?;
+        }
+        let line: Vec<(i32, i32)> = band.x.iter().zip(&band.mean).map(|(x, m)| (px(*x), py(*m))).collect();
+        root.draw(&PathElement::new(line, color.stroke_width(2)))?;
+    }
+    // Legend, top left inside the panel.
+    for (row, &(i, band)) in bands.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let y = upper + 10 + row as i32 * 20;
+        root.draw(&Rectangle::new([(left + 10, y), (left + 30, y + 12)], color.filled()))?;
+        let label = format!("{} (n={})", figure.arms[i].0, band.n_seeds);
+        text(root, &label, left + 38, y, 2, &TEXT)?;
+    }
+    Ok(())
+}
+
+/// `asi plot`: reads the runs, aggregates, draws `out`; prints what it plotted.
+pub fn run(args: &crate::cli::PlotArgs) -> anyhow::Result<()> {
+    let metrics: Vec<String> =
+        if args.metric.is_empty() { DEFAULT_METRICS.iter().map(|m| (*m).to_owned()).collect() } else { args.metric.clone() };
+    let figure = build_figure(&args.run_dirs, &args.x, &metrics)?;
+    for (arm, bands) in &figure.arms {
+        for (metric, band) in metrics.iter().zip(bands) {
+            match band {
+                Some(b) => println!(
+                    "{arm}: {metric}: {} seed(s), final mean {:.4} ± {:.4} at x = {}",
+                    b.n_seeds,
+                    b.mean.last().copied().unwrap_or(f64::NAN),
+                    b.half_width.last().copied().unwrap_or(f64::NAN),
+                    format_tick(b.x.last().copied().unwrap_or(0.0)),
+                ),
+                None => println!("{arm}: {metric}: no data"),
+            }
+        }
+    }
+    render_png(&figure, &args.out)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn series(points: &[(f64, f64)]) -> Series {
+        Series { x: points.iter().map(|p| p.0).collect(), y: points.iter().map(|p| p.1).collect() }
+    }
+
+    #[test]
+    fn arms_drop_seed_tags_only() {
+        for (dir, arm) in [
+            ("runs/u-asi_seed-0", "u-asi"),
+            ("u-asi-seed12", "u-asi"),
+            ("hess_s3", "hess"),
+            ("antmaze-u", "antmaze-u"),
+            ("run42", "run42"),
+            ("_seed-1", "_seed-1"),
+        ] {
+            assert_eq!(arm_name(Path::new(dir)), arm, "{dir}");
+        }
+    }
+
+    #[test]
+    fn aggregate_matches_a_hand_computation() {
+        // Three seeds, linear curves y = a·x on [0, 10] (one sampled coarsely): at x = 10 the
+        // values are 1, 2, 3 → mean 2, sd 1, half-width t(2)·1/√3 = 4.303/√3.
+        let seeds = [
+            series(&[(0.0, 0.0), (10.0, 1.0)]),
+            series(&[(0.0, 0.0), (5.0, 1.0), (10.0, 2.0), (20.0, 4.0)]),
+            series(&[(0.0, 0.0), (10.0, 3.0)]),
+        ];
+        let band = aggregate(&seeds).unwrap();
+        assert_eq!(band.n_seeds, 3);
+        assert_eq!(*band.x.last().unwrap(), 10.0, "grid ends at the shortest run");
+        assert!((band.mean.last().unwrap() - 2.0).abs() < 1e-12);
+        assert!((band.half_width.last().unwrap() - 4.303 / 3f64.sqrt()).abs() < 1e-9);
+        // Midpoint x = 5 (grid point 100 of 200 is not exactly 5; interpolate by hand instead).
+        let k = band.x.iter().position(|x| *x > 4.9).unwrap();
+        let x = band.x[k];
+        assert!((band.mean[k] - (0.1 * x + 0.2 * x + 0.3 * x) / 3.0).abs() < 1e-9);
+        assert_eq!(band.half_width[0], 0.0, "all seeds agree at x = 0");
+    }
+
+    #[test]
+    fn one_seed_has_no_band_and_empty_input_none() {
+        let band = aggregate(&[series(&[(0.0, 1.0), (4.0, 3.0)])]).unwrap();
+        assert!(band.half_width.iter().all(|h| *h == 0.0));
+        assert!((interpolate(&series(&[(0.0, 1.0), (4.0, 3.0)]), 1.0).unwrap() - 1.5).abs() < 1e-12);
+        assert!(aggregate(&[]).is_none());
+        assert!(aggregate(&[series(&[])]).is_none());
+    }
+
+    #[test]
+    fn ticks_are_nice_and_labels_short() {
+        assert_eq!(ticks(0.0, 1.0, 5), vec![0.0, 0.2, 0.4, 0.6000000000000001, 0.8, 1.0]);
+        assert_eq!(ticks(0.0, 1_000_000.0, 4), vec![0.0, 500_000.0, 1_000_000.0]);
+        assert_eq!(format_tick(1_500_000.0), "1.5M");
+        assert_eq!(format_tick(20_000.0), "20K");
+        assert_eq!(format_tick(0.25), "0.25");
+        assert_eq!(format_tick(0.0), "0");
+        assert_eq!(t_975(1), 12.706);
+        assert_eq!(t_975(100), 1.96);
+    }
+
+    #[test]
+    fn series_are_read_monotone_with_last_value_per_x() {
+        let dir = std::env::temp_dir().join(format!("asi-plot-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("metrics.jsonl"),
+            "{\"x\":0,\"m\":0.5}\n{\"x\":10,\"m\":0.1}\n{\"x\":10,\"m\":0.2}\n{\"x\":5,\"m\":9}\n{\"x\":20}\n\n{\"x\":30,\"m\":0.4}\n",
+        )
+        .unwrap();
+        let s = read_series(&dir, "x", "m").unwrap();
+        assert_eq!(s, series(&[(0.0, 0.5), (10.0, 0.2), (30.0, 0.4)]));
+        std::fs::write(dir.join("metrics.jsonl"), "not json\n").unwrap();
+        assert!(read_series(&dir, "x", "m").is_err());
+        let figure = build_figure(&[dir.clone()], "x", &["m".to_owned()]);
+        assert!(figure.is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_figure_renders_to_a_png_file() {
+        let dir = std::env::temp_dir().join(format!("asi-plot-png-{}", std::process::id()));
+        let runs: Vec<PathBuf> = (0..2).map(|s| dir.join(format!("arm_seed-{s}"))).collect();
+        for (s, run) in runs.iter().enumerate() {
+            std::fs::create_dir_all(run).unwrap();
+            let lines: String = (0..20).map(|k| format!("{{\"x\":{},\"m\":{}}}\n", k * 100, k as f64 * 0.05 * (1.0 + s as f64 * 0.1))).collect();
+            std::fs::write(run.join("metrics.jsonl"), lines).unwrap();
+        }
+        let figure = build_figure(&runs, "x", &["m".to_owned(), "absent".to_owned()]).unwrap();
+        assert_eq!(figure.arms.len(), 1);
+        assert_eq!(figure.arms[0].1[0].as_ref().unwrap().n_seeds, 2);
+        assert!(figure.arms[0].1[1].is_none());
+        let out = dir.join("plot.png");
+        render_png(&figure, &out).unwrap();
+        let bytes = std::fs::read(&out).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
