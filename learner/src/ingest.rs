@@ -17,6 +17,12 @@
 //! (physics failure: the failing step is not sent) closes its segment as truncated, so the
 //! value still bootstraps from the last valid state.
 //!
+//! φ store and schedule: each open episode also collects its raw states (`obs` of every step,
+//! then the last `next_obs`) for [`crate::phi::store`] — a gap closes the states so far as a
+//! fragment — and notes whether any chunk carried `FAR_GOAL` and any step reported success;
+//! [`ChunkOutcome::far_goal_success`] reports both at the episode's end (see
+//! [`crate::schedule`]).
+//!
 //! Memory bound: at most [`MAX_OPEN_EPISODES`] open episodes (a killed actor never sends its
 //! last chunk); beyond that the least recently touched one is abandoned and counted. Finished
 //! episodes are remembered ([`MAX_FINISHED_EPISODES`], oldest forgotten first) to recognise
@@ -27,6 +33,7 @@ use std::collections::{HashMap, VecDeque};
 use protocol::{ActorId, EpisodeId, StepView, TrajectoryFlags, TrajectoryHeader};
 
 use crate::error::LearnerError;
+use crate::phi::store::{PhiStore, RunBuilder};
 use crate::replay::{HighReplay, HighTransition, LowReplay, LowTransition};
 
 /// Most episodes kept open at once (ours: far above actors × envs per actor).
@@ -91,6 +98,12 @@ struct OpenEpisode {
     next_chunk: u32,
     segment: Option<OpenSegment>,
     touched: u64,
+    /// Raw states for the φ store ([`crate::phi::store`]).
+    states: RunBuilder,
+    /// Some chunk carried `FAR_GOAL`.
+    far_goal: bool,
+    /// Some step reported success.
+    success: bool,
 }
 
 /// What one stored chunk produced.
@@ -102,6 +115,19 @@ pub struct ChunkOutcome {
     pub episode_ended: bool,
     /// Open segments dropped because of a gap.
     pub segments_dropped: u64,
+    /// The chunk ended an episode that carried `FAR_GOAL` and reported success at some step
+    /// (counts towards `count_prob`, see [`crate::schedule`]).
+    pub far_goal_success: bool,
+}
+
+/// The buffers a stored chunk feeds.
+pub struct Buffers<'a> {
+    /// Low-level replay (every step).
+    pub low: &'a mut LowReplay,
+    /// High-level replay (completed segments).
+    pub high: &'a mut HighReplay,
+    /// φ observation store (an episode's states when it ends).
+    pub phi: &'a mut PhiStore,
 }
 
 /// Per-episode continuity and open segments.
@@ -142,30 +168,40 @@ impl Episodes {
         }
     }
 
-    /// Stores a checked chunk: every step into `low`, completed segments into `high`.
+    /// Stores a checked chunk: every step into `low`, completed segments into `high`, the
+    /// episode's raw states into `phi` once it ends (or a run of them at a gap).
     pub fn store(
         &mut self,
         header: &TrajectoryHeader,
         continuity: Continuity,
         steps: &[StepView],
-        low: &mut LowReplay,
-        high: &mut HighReplay,
+        buffers: Buffers<'_>,
     ) -> ChunkOutcome {
+        let Buffers { low, high, phi } = buffers;
         self.clock += 1;
         let key = (header.actor_id, header.episode_id);
         let entry = self.open.entry(key).or_default();
         let mut outcome = ChunkOutcome::default();
-        if matches!(continuity, Continuity::Gap { .. }) && entry.segment.take().is_some() {
-            outcome.segments_dropped += 1;
+        if matches!(continuity, Continuity::Gap { .. }) {
+            if entry.segment.take().is_some() {
+                outcome.segments_dropped += 1;
+            }
+            entry.states.gap(phi);
         }
         entry.next_chunk = header.chunk_index.saturating_add(1);
         entry.touched = self.clock;
+        entry.far_goal |= header.flags.contains(TrajectoryFlags::FAR_GOAL);
         for step in steps {
             low.push(&low_transition(step));
             outcome.high_added += advance_segment(&mut entry.segment, step, high);
+            entry.states.push_step(step.obs, step.next_obs);
+            entry.success |= step.success;
         }
         if header.flags.contains(TrajectoryFlags::EPISODE_END) {
             outcome.high_added += close_at_end(&mut entry.segment, steps, high);
+            outcome.far_goal_success = entry.far_goal && entry.success;
+            let states = std::mem::take(&mut entry.states);
+            states.end(phi, header.flags.contains(TrajectoryFlags::PHYSICS_FAILURE));
             self.finish(key, header.chunk_index);
             outcome.episode_ended = true;
         }

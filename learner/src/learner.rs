@@ -11,9 +11,21 @@
 //!   weights), each later one is the previous + 1.
 //!
 //! Weights schedule (choice): a new version is due when at least one update has run since the
-//! last publication and at least `transport.weights_check_interval_steps` env steps have been
-//! ingested since then — the cadence at which actors look for weights anyway. The very first
-//! call publishes the initial weights so actors never act with weights of their own.
+//! last publication — or `count_prob`/`fr_prob` of the run schedule changed — and at least
+//! `transport.weights_check_interval_steps` env steps have been ingested since then — the
+//! cadence at which actors look for weights anyway. A finished φ round is published at once,
+//! without waiting for env steps (actors are throttled during a round, so none may arrive).
+//! The very first call publishes the initial weights so actors never act with weights of
+//! their own. Every publication carries the current [`RunSchedule`] ([`crate::schedule`]);
+//! `train_episodes` alone does not trigger one: actors receive it at the normal cadence.
+//!
+//! φ rounds ([`crate::phi::round`]) run inside [`Learner::train`], at most
+//! [`PHI_STEPS_PER_CALL`] Adam steps per call. While a round is due or running, no SAC update
+//! runs, so `updates_low` — and with it the actor throttle budget — does not grow: the actors
+//! stop within `replay.replay_slack_steps`, as the reference code collects nothing during a
+//! round, and what a round sees does not depend on actor speed (the φ store is frozen).
+//! Low-level rewards keep the φ labels computed at collection time (SPEC §6.1, digest §3.2:
+//! the code never relabels them): the low replay is not touched by a round.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -23,21 +35,29 @@ use candle_nn::VarMap;
 use nets::{spec_from_config, NetsSpec, TaskDims};
 use protocol::config::LowAlgo;
 use protocol::{
-    Config, PhiVersion, PolicyVersion, StepLayout, StepView, TrajectoryHeader, WeightsHeader,
+    Config, PhiVersion, PolicyVersion, RunSchedule, StepLayout, StepView, TrajectoryHeader,
+    WeightsHeader,
 };
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
 use crate::error::LearnerError;
-use crate::ingest::Episodes;
+use crate::ingest::{Buffers, Episodes};
+use crate::phi::{PhiParams, PhiStats, PhiStore, PhiTrainer};
 use crate::ratio::ReplayRatio;
 use crate::replay::{sample_into, BatchStage, HighReplay, LowReplay, LowRewardSpec};
 use crate::sac::{SacBatch, SacLevel, SacStats};
+use crate::schedule::ScheduleTracker;
 use crate::setup::{build_networks, deterministic_unsupported, Networks};
 
 /// Offset of the sampling RNG seed from the run seed (ours; keeps it apart from the init).
 const SAMPLING_SEED_OFFSET: u64 = 0x5a3b_1e00;
+/// Offset of the φ triplet-sampling seed from the run seed (ours).
+const PHI_SEED_OFFSET: u64 = 0x0f1e_5eed;
+/// Most φ Adam steps one [`Learner::train`] call runs (ours): a slice of a round short enough
+/// (tens of milliseconds at the default sizes) that ingest and publication keep going.
+pub const PHI_STEPS_PER_CALL: u64 = 200;
 
 /// Where training stands; the actor throttle reads `env_steps_ingested` and `env_step_budget`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -87,6 +107,8 @@ struct PublishState {
     published_once: bool,
     steps_at_last: u64,
     updates_at_last: u64,
+    phi_at_last: PhiVersion,
+    schedule_at_last: RunSchedule,
 }
 
 /// Metrics-only measurements.
@@ -121,6 +143,9 @@ pub struct Learner {
     publish: PublishState,
     publish_interval_steps: u64,
     telemetry: Telemetry,
+    phi_store: PhiStore,
+    phi: PhiTrainer,
+    schedule: ScheduleTracker,
 }
 
 impl Learner {
@@ -166,6 +191,18 @@ impl Learner {
         let nets = build_networks(config, &spec, seed)?;
         let length = config.env.episode_length.unwrap_or(episode_length);
         let (low_replay, high_replay) = buffers(config, &spec);
+        let phi_params = PhiParams::from_config(config);
+        let phi_store = PhiStore::new(
+            spec.obs_dim,
+            phi_params.negative_offset,
+            usize::try_from(config.replay.capacity_steps).unwrap_or(usize::MAX),
+        );
+        let phi = PhiTrainer::new(
+            phi_params,
+            &spec,
+            &nets.policy_vm,
+            seed.wrapping_add(PHI_SEED_OFFSET),
+        )?;
         Ok(Learner {
             layout,
             low_stage: low_replay.stage(config.learner.low.batch_size),
@@ -184,6 +221,9 @@ impl Learner {
             publish: PublishState::default(),
             publish_interval_steps: u64::from(config.transport.weights_check_interval_steps),
             telemetry: Telemetry::default(),
+            phi_store,
+            phi,
+            schedule: ScheduleTracker::new(config),
             spec,
             nets,
         })
@@ -207,13 +247,12 @@ impl Learner {
         if let crate::ingest::Continuity::Gap { lost } = continuity {
             self.stats.lost_chunks += lost;
         }
-        let outcome = self.episodes.store(
-            header,
-            continuity,
-            &steps,
-            &mut self.low_replay,
-            &mut self.high_replay,
-        );
+        let buffers = Buffers {
+            low: &mut self.low_replay,
+            high: &mut self.high_replay,
+            phi: &mut self.phi_store,
+        };
+        let outcome = self.episodes.store(header, continuity, &steps, buffers);
         self.count_stored(header, steps.len() as u64, &outcome);
         Ok(())
     }
@@ -260,6 +299,9 @@ impl Learner {
         s.high_transitions += outcome.high_added;
         s.dropped_segments += outcome.segments_dropped;
         s.abandoned_episodes = self.episodes.n_abandoned();
+        if outcome.episode_ended {
+            self.schedule.on_episode_end(outcome.far_goal_success);
+        }
         let lag = self
             .policy_version
             .0
@@ -284,9 +326,34 @@ impl Learner {
             .saturating_sub(self.updates_high)
     }
 
-    /// Runs the updates that the replay ratio allows now, at most `max_updates`, alternating
-    /// low and high; returns how many ran.
+    /// Runs the work due now and returns how much ran (0 = nothing to do): when a φ round is
+    /// due or running, one slice of it (at most [`PHI_STEPS_PER_CALL`] Adam steps, returned as
+    /// their number; no SAC update runs meanwhile, see the module doc); otherwise the SAC
+    /// updates that the replay ratio allows, at most `max_updates`, alternating low and high.
     pub fn train(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
+        if self
+            .phi
+            .start_if_due(self.schedule.train_episodes(), &mut self.phi_store)?
+        {
+            return self.phi_slice();
+        }
+        self.train_sac(max_updates)
+    }
+
+    /// One slice of the running φ round; a finished round raises the φ version.
+    fn phi_slice(&mut self) -> Result<usize, LearnerError> {
+        let outcome = self
+            .phi
+            .run_slice(&mut self.phi_store, PHI_STEPS_PER_CALL)?;
+        if outcome.round_finished {
+            self.phi_version = PhiVersion(self.phi_version.0 + 1);
+        }
+        // A slice always runs at least one step (a round has ≥ 1 step), so callers see work.
+        Ok(usize::try_from(outcome.steps).unwrap_or(usize::MAX))
+    }
+
+    /// SAC updates the ratio allows, at most `max_updates`.
+    fn train_sac(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
         let start = Instant::now();
         let mut done = 0;
         while done < max_updates {
@@ -354,10 +421,14 @@ impl Learner {
     pub fn publish_due(&mut self) -> Result<Option<(WeightsHeader, Vec<u8>)>, LearnerError> {
         let updates = self.updates_low + self.updates_high;
         let p = self.publish;
-        let changed = updates > p.updates_at_last;
+        let schedule = self.schedule.current();
+        let schedule_changed = schedule.count_prob != p.schedule_at_last.count_prob
+            || schedule.fr_prob != p.schedule_at_last.fr_prob;
+        let changed = updates > p.updates_at_last || schedule_changed;
         let waited =
             self.stats.env_steps.saturating_sub(p.steps_at_last) >= self.publish_interval_steps;
-        if p.published_once && !(changed && waited) {
+        let new_phi = self.phi_version != p.phi_at_last;
+        if p.published_once && !new_phi && !(changed && waited) {
             return Ok(None);
         }
         let bytes = nets::to_safetensors_bytes(&self.nets.policy_vm)?;
@@ -371,12 +442,15 @@ impl Learner {
             self.phi_version,
             self.weights_layout_hash(),
             bytes.len(),
-        );
+        )
+        .with_schedule(schedule);
         self.policy_version = version;
         self.publish = PublishState {
             published_once: true,
             steps_at_last: self.stats.env_steps,
             updates_at_last: updates,
+            phi_at_last: self.phi_version,
+            schedule_at_last: schedule,
         };
         Ok(Some((header, bytes)))
     }
@@ -401,6 +475,26 @@ impl Learner {
     /// Ingest counters.
     pub fn ingest_stats(&self) -> &IngestStats {
         &self.stats
+    }
+
+    /// The run-wide schedule as it would be published now.
+    pub fn run_schedule(&self) -> RunSchedule {
+        self.schedule.current()
+    }
+
+    /// The φ observation store.
+    pub fn phi_store(&self) -> &PhiStore {
+        &self.phi_store
+    }
+
+    /// φ training statistics.
+    pub fn phi_stats(&self) -> PhiStats {
+        self.phi.stats()
+    }
+
+    /// Whether a φ round is running (SAC updates wait for it).
+    pub fn phi_round_active(&self) -> bool {
+        self.phi.is_active()
     }
 
     /// The replay-ratio constants in use.
@@ -449,7 +543,51 @@ impl Learner {
         let mut out = sac_metrics(&self.telemetry.low, LOW_NAMES);
         out.extend(sac_metrics(&self.telemetry.high, HIGH_NAMES));
         out.extend(self.count_metrics());
+        out.extend(self.phi_metrics());
         out
+    }
+
+    /// φ and run-schedule metrics.
+    fn phi_metrics(&self) -> Vec<(&'static str, f64)> {
+        let s = self.phi.stats();
+        let st = self.phi_store.stats();
+        let schedule = self.schedule.current();
+        let per_sec = if s.secs > 0.0 {
+            s.steps as f64 / s.secs
+        } else {
+            0.0
+        };
+        vec![
+            ("phi/triplet_loss", s.triplet.loss),
+            ("phi/positive_sq", s.triplet.positive_sq),
+            ("phi/negative_sq", s.triplet.negative_sq),
+            ("phi/hinge_active", s.triplet.hinge_active),
+            ("phi/stable_loss", s.stable_loss),
+            ("phi/round_start_loss", s.round_start_loss),
+            ("phi/round_end_loss", s.round_end_loss),
+            ("phi/rounds", s.rounds as f64),
+            ("phi/skipped_rounds", s.skipped_rounds as f64),
+            (
+                "phi/round_active",
+                f64::from(u8::from(self.phi.is_active())),
+            ),
+            ("phi/steps", s.steps as f64),
+            ("phi/steps_per_sec", per_sec),
+            ("phi/version", self.phi_version.0 as f64),
+            ("phi/store_states", self.phi_store.n_states() as f64),
+            ("phi/store_runs", self.phi_store.n_runs() as f64),
+            ("phi/store_fragments", st.fragments as f64),
+            ("phi/store_dropped_short", st.dropped_short as f64),
+            ("phi/store_evicted", st.evicted as f64),
+            ("phi/physics_failure_episodes", st.physics_failures as f64),
+            ("schedule/train_episodes", schedule.train_episodes as f64),
+            ("schedule/count_prob", f64::from(schedule.count_prob)),
+            ("schedule/fr_prob", f64::from(schedule.fr_prob)),
+            (
+                "schedule/window_far_goal_successes",
+                self.schedule.window_successes() as f64,
+            ),
+        ]
     }
 
     /// Counter metrics.

@@ -9,6 +9,8 @@
 //!   high-level transitions from decision steps across chunk boundaries.
 //! - [`ratio`]: the replay-ratio accounting and the actor throttle budget.
 //! - [`sac`]: SAC losses (pure functions, one module for both levels) and the update.
+//! - [`phi`]: the φ observation store, the triplet and stable losses, the training rounds.
+//! - [`schedule`]: the run-wide schedule (training episodes, `count_prob`, `fr_prob`).
 //! - [`setup`]: the networks (published policy set, online and target critics).
 //! - [`learner`]: the [`Learner`] itself: ingest, train, publish, progress, metrics.
 //!
@@ -17,12 +19,14 @@
 pub mod error;
 pub mod ingest;
 pub mod learner;
+pub mod phi;
 pub mod ratio;
 pub mod replay;
 pub mod sac;
+pub mod schedule;
 pub mod setup;
 
 pub use error::LearnerError;
-pub use learner::{IngestStats, Learner, LearnerProgress};
+pub use learner::{IngestStats, Learner, LearnerProgress, PHI_STEPS_PER_CALL};
 pub use nets::TaskDims;
 pub use ratio::ReplayRatio;

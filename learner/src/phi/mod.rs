@@ -1,0 +1,17 @@
+//! The representation φ (HESS stable representation; paper Eq. 5–7, SPEC §6.3, digest §4).
+//!
+//! - [`store`]: the episode-structured observation store triplets are sampled from, with one
+//!   priority per state.
+//! - [`losses`]: the triplet and stable losses as pure functions.
+//! - [`round`]: the round schedule, sampling and Adam steps, run in slices by
+//!   [`crate::Learner::train`].
+
+pub mod losses;
+pub mod round;
+pub mod store;
+
+pub use losses::{stable_loss, triplet_loss, TripletStats};
+pub use round::{
+    phi_objective, phi_optimizer, PhiObjective, PhiParams, PhiStats, PhiTrainer, SliceOutcome,
+};
+pub use store::{Candidate, PhiStore, RunKind, StoreStats};

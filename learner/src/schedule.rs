@@ -1,0 +1,87 @@
+//! The run-wide schedule ([`RunSchedule`]) computed from every ingested episode, over all
+//! actors (SPEC §6.4, §6.6; digest §2.2, §5.1).
+//!
+//! - `train_episodes`: training episodes whose final chunk was ingested (every chunk that
+//!   reaches the learner comes from a training episode: evaluation episodes are not sent).
+//! - `count_prob`: starts at 1; after every `exploration.count_prob_interval_episodes`-th
+//!   completed episode it becomes `1 / (1 + exp(2x − 1))`, x = (episodes of that window that
+//!   carried [`TrajectoryFlags::FAR_GOAL`](protocol::TrajectoryFlags::FAR_GOAL) and succeeded) / `exploration.count_prob_success_unit`.
+//!   "Succeeded" as in the code (`train_success`): the env reported success at any step of the
+//!   episode (training episodes do not stop on success). Windows are consecutive blocks of
+//!   episodes in the order their final chunks arrived.
+//! - `fr_prob`: 0 unless `asi.frontier_reaching`; otherwise, for the next episode (index
+//!   `train_episodes`, 0-based like the code's `epoch`), `asi.fr_prob(train_episodes)` once
+//!   `train_episodes > asi.fr_start_episode` (code: `epoch > 200`), else 0.
+
+use protocol::config::AsiConfig;
+use protocol::{Config, RunSchedule};
+
+/// `1 / (1 + exp(2x − 1))` with `x = successes / unit` (digest §5.1).
+pub fn count_prob(successes: u64, unit: f64) -> f64 {
+    let x = successes as f64 / unit;
+    1.0 / (1.0 + (2.0 * x - 1.0).exp())
+}
+
+/// Running computation of the [`RunSchedule`]; see the module doc.
+#[derive(Debug, Clone)]
+pub struct ScheduleTracker {
+    interval: u64,
+    success_unit: f64,
+    asi: AsiConfig,
+    train_episodes: u64,
+    window_successes: u64,
+    count_prob: f64,
+}
+
+impl ScheduleTracker {
+    /// The tracker for `config`, before any episode.
+    pub fn new(config: &Config) -> Self {
+        Self {
+            interval: config.exploration.count_prob_interval_episodes.max(1),
+            success_unit: config.exploration.count_prob_success_unit,
+            asi: config.asi.clone(),
+            train_episodes: 0,
+            window_successes: 0,
+            count_prob: f64::from(RunSchedule::START.count_prob),
+        }
+    }
+
+    /// One more completed training episode; `far_goal_success` = it had the `FAR_GOAL` flag and
+    /// reported success at some step.
+    pub fn on_episode_end(&mut self, far_goal_success: bool) {
+        self.train_episodes += 1;
+        self.window_successes += u64::from(far_goal_success);
+        if self.train_episodes.is_multiple_of(self.interval) {
+            self.count_prob = count_prob(self.window_successes, self.success_unit);
+            self.window_successes = 0;
+        }
+    }
+
+    /// Completed training episodes.
+    pub fn train_episodes(&self) -> u64 {
+        self.train_episodes
+    }
+
+    /// Far-goal successes in the current (incomplete) window.
+    pub fn window_successes(&self) -> u64 {
+        self.window_successes
+    }
+
+    /// FR probability for the next episode.
+    pub fn fr_prob(&self) -> f64 {
+        if self.asi.frontier_reaching && self.train_episodes > self.asi.fr_start_episode {
+            self.asi.fr_prob(self.train_episodes)
+        } else {
+            0.0
+        }
+    }
+
+    /// The schedule to broadcast now.
+    pub fn current(&self) -> RunSchedule {
+        RunSchedule {
+            train_episodes: self.train_episodes,
+            count_prob: self.count_prob as f32,
+            fr_prob: self.fr_prob() as f32,
+        }
+    }
+}
