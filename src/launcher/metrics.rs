@@ -26,6 +26,8 @@ const CSV_COLUMNS: [&str; 9] = [
     "evaluator0/eval/success_rate",
     "evaluator0/eval/train_episodes",
 ];
+/// How often `plots/curves.png` is redrawn from `metrics.jsonl`.
+const PLOT_INTERVAL: Duration = Duration::from_secs(60);
 /// How often a plain progress line is logged when stderr is not a terminal.
 const PLAIN_PROGRESS_INTERVAL: Duration = Duration::from_secs(10);
 
@@ -38,6 +40,8 @@ pub struct MetricsBook {
     bar: ProgressBar,
     last_plain: Instant,
     rate: RateMeter,
+    run_dir: std::path::PathBuf,
+    last_plot: Instant,
 }
 
 impl MetricsBook {
@@ -58,6 +62,8 @@ impl MetricsBook {
             bar,
             last_plain: Instant::now(),
             rate: RateMeter::default(),
+            run_dir: ctx.run_dir.clone(),
+            last_plot: Instant::now(),
         })
     }
 
@@ -130,10 +136,28 @@ impl MetricsBook {
         self.jsonl.flush()?;
         self.csv.flush()?;
         self.tensorboard.flush()?;
+        if self.last_plot.elapsed() >= PLOT_INTERVAL {
+            self.plot();
+        }
         Ok(())
     }
 
-    pub fn finish(&self) {
+    /// Redraws `plots/curves.png` (test success and coverage against env steps); a failure is
+    /// logged, never fatal.
+    pub fn plot(&mut self) {
+        self.last_plot = Instant::now();
+        let metrics: Vec<String> = crate::plot::DEFAULT_METRICS.iter().map(|m| (*m).to_owned()).collect();
+        let drawn = std::fs::create_dir_all(self.run_dir.join("plots"))
+            .map_err(anyhow::Error::from)
+            .and_then(|()| crate::plot::build_figure(std::slice::from_ref(&self.run_dir), crate::plot::DEFAULT_X, &metrics))
+            .and_then(|figure| crate::plot::render_png(&figure, &self.run_dir.join("plots").join("curves.png")));
+        if let Err(err) = drawn {
+            tracing::warn!("plots/curves.png not drawn: {err:#}");
+        }
+    }
+
+    pub fn finish(&mut self) {
+        self.plot();
         self.bar.finish_and_clear();
     }
 }
