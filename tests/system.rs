@@ -156,7 +156,8 @@ fn assert_nothing_lost(run: &Run, actor_statuses: &[Value]) {
 #[test]
 fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let mut run = Run::start("complete", &[]);
+    // Evaluations every 4 training episodes, 2 episodes each, so the evaluator runs too.
+    let mut run = Run::start("complete", &["--set", "eval.interval_episodes=4", "--set", "eval.n_episodes=2"]);
     let status = run.wait();
     assert!(status.success(), "launcher exit: {status}");
     let actors = [run.status("actor-0-0"), run.status("actor-1-0")];
@@ -166,6 +167,20 @@ fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() 
     }
     assert!(run.dir.join("config.resolved.toml").exists());
     assert!(learner_steps_in_metrics(&run.dir) > 0, "metrics.jsonl has learner progress");
+    // The evaluator evaluated published weights at least once and wrote its outputs.
+    let evals = std::fs::read_to_string(run.dir.join("eval.jsonl")).unwrap_or_default();
+    let first: Value = serde_json::from_str(evals.lines().next().expect("an evaluation ran")).unwrap();
+    let rate = first["success_rate"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&rate), "{first}");
+    assert!(first["train_episodes"].as_u64().unwrap() >= 4, "due only after 4 episodes: {first}");
+    assert!(as_u64(&run.status("evaluator"), "evaluations") >= 1);
+    for picture in ["plots/eval_latest.png", "plots/curves.png"] {
+        let bytes = std::fs::read(run.dir.join(picture)).unwrap_or_default();
+        assert!(bytes.starts_with(b"\x89PNG"), "{picture} is a PNG");
+    }
+    let events: Vec<_> = std::fs::read_dir(run.dir.join("tensorboard")).unwrap().flatten().collect();
+    assert_eq!(events.len(), 1, "one TensorBoard event file");
+    assert!(events[0].metadata().unwrap().len() > 100, "event file has records");
     assert_eq!(leftovers_of(&run.run_id()), Vec::<String>::new());
 }
 
