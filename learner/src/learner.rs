@@ -20,7 +20,7 @@
 //! `train_episodes` alone does not trigger one: actors receive it at the normal cadence.
 //!
 //! φ rounds ([`crate::phi::round`]) run inside [`Learner::train`], at most
-//! [`PHI_STEPS_PER_CALL`] Adam steps per call. While a round is due or running, no SAC update
+//! `min(max_updates, PHI_STEPS_PER_CALL)` Adam steps per call. While a round is due or running, no SAC update
 //! runs, so `updates_low` — and with it the actor throttle budget — does not grow: the actors
 //! stop within `replay.replay_slack_steps`, as the reference code collects nothing during a
 //! round, and what a round sees does not depend on actor speed (the φ store is frozen).
@@ -56,8 +56,9 @@ const SAMPLING_SEED_OFFSET: u64 = 0x5a3b_1e00;
 /// Offset of the φ triplet-sampling seed from the run seed (ours).
 const PHI_SEED_OFFSET: u64 = 0x0f1e_5eed;
 /// Most φ Adam steps one [`Learner::train`] call runs (ours): a slice of a round short enough
-/// (tens of milliseconds at the default sizes) that ingest and publication keep going.
-pub const PHI_STEPS_PER_CALL: u64 = 200;
+/// (milliseconds in release builds at the default sizes) that ingest, progress messages and
+/// publication keep going — a long slice leaves actors acting on a stale progress message.
+pub const PHI_STEPS_PER_CALL: u64 = 50;
 
 /// Where training stands; the actor throttle reads `env_steps_ingested` and `env_step_budget`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -327,24 +328,26 @@ impl Learner {
     }
 
     /// Runs the work due now and returns how much ran (0 = nothing to do): when a φ round is
-    /// due or running, one slice of it (at most [`PHI_STEPS_PER_CALL`] Adam steps, returned as
-    /// their number; no SAC update runs meanwhile, see the module doc); otherwise the SAC
+    /// due or running, one slice of it (at most `max_updates` and [`PHI_STEPS_PER_CALL`] Adam
+    /// steps, returned as their number; no SAC update runs meanwhile, see the module doc);
+    /// otherwise the SAC
     /// updates that the replay ratio allows, at most `max_updates`, alternating low and high.
     pub fn train(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
         if self
             .phi
             .start_if_due(self.schedule.train_episodes(), &mut self.phi_store)?
         {
-            return self.phi_slice();
+            return self.phi_slice(max_updates);
         }
         self.train_sac(max_updates)
     }
 
-    /// One slice of the running φ round; a finished round raises the φ version.
-    fn phi_slice(&mut self) -> Result<usize, LearnerError> {
-        let outcome = self
-            .phi
-            .run_slice(&mut self.phi_store, PHI_STEPS_PER_CALL)?;
+    /// One slice of the running φ round (at most `max_updates` and [`PHI_STEPS_PER_CALL`]
+    /// steps, at least one); a finished round raises the φ version.
+    fn phi_slice(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
+        let cap = u64::try_from(max_updates).unwrap_or(u64::MAX);
+        let steps = cap.clamp(1, PHI_STEPS_PER_CALL);
+        let outcome = self.phi.run_slice(&mut self.phi_store, steps)?;
         if outcome.round_finished {
             self.phi_version = PhiVersion(self.phi_version.0 + 1);
         }
@@ -567,6 +570,7 @@ impl Learner {
             ("phi/round_end_loss", s.round_end_loss),
             ("phi/rounds", s.rounds as f64),
             ("phi/skipped_rounds", s.skipped_rounds as f64),
+            ("phi/coalesced_rounds", s.coalesced_rounds as f64),
             (
                 "phi/round_active",
                 f64::from(u8::from(self.phi.is_active())),

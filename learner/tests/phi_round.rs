@@ -12,7 +12,8 @@ use learner::{Learner, PHI_STEPS_PER_CALL};
 use nets::{load_safetensors_bytes, prefix, seeded_var_builder, Encoder, PolicySet};
 use protocol::{PhiVersion, TrajectoryFlags};
 
-/// Rounds after 4 and 8 episodes, 300 steps each (two slices), batch 16, lr 0.01, k = c = 2.
+/// Rounds after 4 and 8 episodes, 300 steps each (several slices), batch 16, lr 0.01,
+/// k = c = 2.
 fn config() -> protocol::Config {
     let mut c = common::config();
     c.encoder.first_round_episode = 4;
@@ -146,8 +147,12 @@ fn while_a_round_runs_no_sac_update_runs_the_budget_holds_and_new_episodes_wait(
         "the store is frozen during a round"
     );
     assert_eq!(l.phi_store().n_staged(), 1);
-    assert_eq!(l.train(usize::MAX).unwrap(), 100, "the rest of the round");
-    assert!(!l.phi_round_active());
+    let mut rest = 0;
+    while l.phi_round_active() {
+        assert_eq!(l.progress().updates_low, before.updates_low);
+        rest += l.train(usize::MAX).unwrap() as u64;
+    }
+    assert_eq!(rest, 300 - PHI_STEPS_PER_CALL, "the rest of the round");
     assert_eq!(
         l.phi_store().n_runs(),
         5,
@@ -244,4 +249,30 @@ fn lost_chunks_split_an_episode_and_short_runs_are_dropped_and_counted() {
     assert_eq!((s.physics_failures, s.dropped_short), (2, 1));
     assert_eq!(l.phi_store().n_runs(), 3);
     assert_eq!(metric(&l, "phi/store_fragments"), 2.0);
+}
+
+#[test]
+fn overdue_rounds_coalesce_into_one() {
+    let mut l = learner();
+    for ep in 0..13 {
+        ingest_episode(&mut l, 0, ep, 10, 2, 5); // points 4, 8, 12 all reached
+    }
+    while l.train(usize::MAX).unwrap() > 0 {}
+    assert_eq!(metric(&l, "phi/rounds"), 1.0);
+    assert_eq!(metric(&l, "phi/coalesced_rounds"), 2.0);
+    assert_eq!(
+        metric(&l, "phi/stable_loss"),
+        0.0,
+        "still the first round: no stable term"
+    );
+    assert!(
+        l.progress().updates_low > 0,
+        "SAC updates ran after the single round"
+    );
+    for ep in 13..16 {
+        ingest_episode(&mut l, 0, ep, 10, 2, 5);
+    }
+    while l.train(usize::MAX).unwrap() > 0 {}
+    assert_eq!(metric(&l, "phi/rounds"), 2.0, "the next point is 16");
+    assert!(metric(&l, "phi/stable_loss") > 0.0);
 }

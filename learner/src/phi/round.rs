@@ -3,7 +3,11 @@
 //! Schedule: round `j` (0, 1, …) is due once `first_round_episode + j · interval_episodes`
 //! training episodes have been ingested (the code's "epoch 100, 200, …"; the code's epoch
 //! counts from 0, so its round at epoch 100 follows the 101st episode — one episode apart).
-//! Rounds never overlap; if several are due they run one after the other.
+//! Rounds never overlap. Overdue rounds coalesce (rule): when a round starts, every schedule
+//! point already reached is consumed by it, so a learner that fell behind (actors that ran on
+//! while it was busy) runs one round, not a burst that would starve the SAC updates; the
+//! skipped points are counted ([`PhiStats::coalesced_rounds`]). Serial mode checks after
+//! every chunk, so there no point is ever skipped.
 //!
 //! A round: freeze the store and list its candidates `(run, t)`, `t + k` inside the run;
 //! snapshot `φ_old ← φ`; then `steps_per_round` Adam steps (lr `encoder.lr`, batch
@@ -16,9 +20,9 @@
 //!   larger λ; the code's unused `prioritized_collect`), `drop_lowest_loss` samples uniformly
 //!   above the `regularization_low_ratio` quantile of p (the code's `low_p`); the loss weight
 //!   λ itself is 1 in both (the weighting is in the sampling);
-//! - the stable term only from round 1 on (code: `epoch > 100`), with `stable_coeff`, or
-//!   `stable_coeff_late` for rounds at more than `stable_coeff_switch_episode` episodes
-//!   (code: `epoch > 500`);
+//! - the stable term from the second round started on (code: `epoch > 100`), with
+//!   `stable_coeff`, or `stable_coeff_late` for rounds whose schedule point lies after
+//!   `stable_coeff_switch_episode` episodes (code: `epoch > 500`);
 //! - every sampled anchor's per-sample triplet loss (from the step's forward pass) is kept
 //!   and written back as its priority when the round ends; later samples overwrite earlier
 //!   ones, never-sampled states keep theirs.
@@ -119,6 +123,8 @@ pub struct PhiStats {
     pub rounds: u64,
     /// Rounds skipped because the store held no candidate.
     pub skipped_rounds: u64,
+    /// Schedule points consumed by a later round because the learner was behind.
+    pub coalesced_rounds: u64,
     /// Adam steps run in total.
     pub steps: u64,
     /// Seconds spent in φ steps (metrics only).
@@ -270,8 +276,12 @@ impl PhiTrainer {
         if train_episodes < self.next_round_episode() {
             return Ok(false);
         }
-        let index = self.next_round;
-        self.next_round += 1;
+        let mut index = self.next_round;
+        while self.params.round_episode(index + 1) <= train_episodes {
+            index += 1;
+            self.stats.coalesced_rounds += 1;
+        }
+        self.next_round = index + 1;
         let candidates = store.candidates();
         if candidates.is_empty() {
             self.stats.skipped_rounds += 1;
@@ -296,7 +306,12 @@ impl PhiTrainer {
         store.freeze();
         self.active = Some(ActiveRound {
             index,
-            coeff: self.params.stable_coeff_for(index),
+            // The first round completed has no stable term (there is no earlier φ to keep).
+            coeff: if self.stats.rounds == 0 {
+                0.0
+            } else {
+                self.params.stable_coeff_for(index.max(1))
+            },
             old: self.snapshot()?,
             new_priority: vec![f32::NAN; candidates.len()],
             candidates,
