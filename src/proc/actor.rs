@@ -36,7 +36,7 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     let mut oracle = ServiceOracle::new(IpcGraph::new(channels.graph_client(&node)?, timeout));
     let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Actor, args.actor_id, config);
     let stop = StopWatch::new();
-    let mut latest = ProgressMessage::default();
+    let mut throttle = Throttle::default();
     let mut published_steps = 0u64;
     let mut published_chunks = 0u64;
     let mut reach_means = ReachMeans::default();
@@ -46,11 +46,11 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
         }
         load_new_weights(&mut actor, &weights);
         if let Some(p) = progress.drain()?.last() {
-            latest = *p;
+            throttle.observe(*p);
         }
         // Before the learner's first progress message the budget is 0: nobody would store our
         // data yet, so we wait as if throttled.
-        if !latest.allows_more() {
+        if !throttle.allows_more() {
             // An interrupted wait (termination signal) is caught by the stop check above.
             let _ = progress.listener().timed_wait(|_| {}, THROTTLE_WAIT);
             continue;
@@ -59,6 +59,7 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
         trajectories.send(chunk.header, &chunk.records)?;
         published_steps += u64::from(chunk.header.n_steps);
         published_chunks += 1;
+        throttle.published(u64::from(chunk.header.n_steps));
         if metrics.due() {
             let mut values = actor_metrics(&actor.stats(), published_steps);
             values.extend(reach_means.since_last(&actor.stats()));
@@ -79,6 +80,36 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             "stop_reason": reason,
         }),
     )
+}
+
+/// The learner's replay-ratio budget as this actor sees it (SPEC §6.8): the latest progress
+/// message, plus the steps this actor published since the learner's ingested count last moved.
+/// Those are in flight (or waiting in the learner's buffer while it trains) and not yet in
+/// `env_steps_ingested`; without counting them an actor keeps publishing against a stale message
+/// for as long as the learner is busy, and the run overshoots its budget by far.
+#[derive(Default)]
+struct Throttle {
+    latest: ProgressMessage,
+    in_flight_steps: u64,
+}
+
+impl Throttle {
+    fn observe(&mut self, progress: ProgressMessage) {
+        if progress.env_steps_ingested != self.latest.env_steps_ingested {
+            // The learner moved on; what it has not taken yet is at most one message's worth,
+            // so a lost chunk never blocks this actor for good.
+            self.in_flight_steps = 0;
+        }
+        self.latest = progress;
+    }
+
+    fn published(&mut self, steps: u64) {
+        self.in_flight_steps += steps;
+    }
+
+    fn allows_more(&self) -> bool {
+        self.latest.env_steps_ingested.saturating_add(self.in_flight_steps) < self.latest.env_step_budget
+    }
 }
 
 /// Episodes per incarnation range: a restarted actor starts at `incarnation × 2^28`, so its
