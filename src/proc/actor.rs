@@ -213,3 +213,28 @@ impl GraphTransport for IpcGraph {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn progress(ingested: u64, budget: u64) -> ProgressMessage {
+        ProgressMessage { env_steps_ingested: ingested, env_step_budget: budget, ..ProgressMessage::default() }
+    }
+
+    #[test]
+    fn the_throttle_counts_own_steps_until_the_learner_ingests_again() {
+        let mut throttle = Throttle::default();
+        assert!(!throttle.allows_more(), "no progress message yet: budget 0");
+        throttle.observe(progress(1000, 1100));
+        assert!(throttle.allows_more());
+        throttle.published(50);
+        assert!(throttle.allows_more(), "1000 + 50 < 1100");
+        throttle.published(50);
+        assert!(!throttle.allows_more(), "1000 + 100 in flight reaches the budget");
+        throttle.observe(progress(1000, 1100));
+        assert!(!throttle.allows_more(), "a repeated message does not forget what is in flight");
+        throttle.observe(progress(1100, 1300));
+        assert!(throttle.allows_more(), "the learner took our steps: 1100 < 1300");
+    }
+}
