@@ -11,11 +11,13 @@
 //! - [`sac`]: SAC losses (pure functions, one module for both levels) and the update.
 //! - [`phi`]: the φ observation store, the triplet and stable losses, the training rounds.
 //! - [`schedule`]: the run-wide schedule (training episodes, `count_prob`, `fr_prob`).
+//! - [`deterministic`]: losses of the reference code's deterministic low level (not wired yet).
 //! - [`setup`]: the networks (published policy set, online and target critics).
 //! - [`learner`]: the [`Learner`] itself: ingest, train, publish, progress, metrics.
 //!
 //! Dependencies: `protocol` (wire types, config) and `nets` (networks) only.
 
+pub mod deterministic;
 pub mod error;
 pub mod ingest;
 pub mod learner;
