@@ -118,6 +118,16 @@ fn learner_steps_in_metrics(dir: &Path) -> u64 {
 }
 
 /// iceoryx2 services and nodes whose names contain the run id (they must all be gone).
+/// Whether a metrics line shows actor 0's second incarnation with published steps (an actor
+/// publishes its metrics only after sending a chunk).
+fn restarted_actor0_published(dir: &Path) -> bool {
+    let text = std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap_or_default();
+    text.lines().filter_map(|l| serde_json::from_str::<Value>(l).ok()).any(|v| {
+        v["actor0/actor/incarnation"].as_f64().is_some_and(|i| i >= 1.0)
+            && v["actor0/actor/env_steps"].as_f64().is_some_and(|s| s > 0.0)
+    })
+}
+
 fn leftovers_of(run_id: &str) -> Vec<String> {
     use iceoryx2::prelude::*;
     let mut found = Vec::new();
@@ -209,6 +219,7 @@ fn a_killed_actor_is_restarted_and_the_run_continues() {
     run.signal(first_pid, libc::SIGKILL);
     run.wait_until("actor-0 restarted", |dir| pid_of(dir, "actor-0").is_some_and(|pid| pid != first_pid));
     let steps_at_restart = learner_steps_in_metrics(&run.dir);
+    run.wait_until("the restarted actor published data", restarted_actor0_published);
     run.wait_until("training continued after the restart", |dir| learner_steps_in_metrics(dir) > steps_at_restart + 500);
     run.signal(run.child.id(), libc::SIGTERM);
     let status = run.wait();

@@ -64,6 +64,7 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             let mut values = actor_metrics(&actor.stats(), published_steps);
             values.extend(reach_means.since_last(&actor.stats()));
             values.push(("actor/graph_unreachable".to_owned(), oracle.transport().n_unreachable as f64));
+            values.push(("actor/incarnation".to_owned(), f64::from(args.incarnation)));
             metrics.publish(published_steps, &values);
         }
     };
