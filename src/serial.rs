@@ -3,11 +3,13 @@
 //! loop, so a run is deterministic for its seed: two runs with the same config produce
 //! identical `metrics.jsonl` files. Meant for debugging and for tests. Actors ask the
 //! graph-service (HESS exploration, reaching reports) by calling its request handler directly,
-//! with the same encoded messages as in process mode.
+//! with the same encoded messages as in process mode. Evaluations run inline when they fall
+//! due (same schedule and outputs as the evaluator process).
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
 
+use actor::eval::Evaluator;
 use actor::{Actor, GraphTransport, ServiceOracle};
 use anyhow::{bail, Context};
 use graph_service::GraphService;
@@ -17,6 +19,7 @@ use protocol::ActorId;
 
 use crate::proc::actor::{actor_metrics, ReachMeans};
 use crate::proc::common::task_info;
+use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
 use crate::run::RunContext;
 
 /// Updates per `train` call while catching up with the replay ratio.
@@ -36,7 +39,8 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         .context("building the actors")?;
     let mut metrics = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
     let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
-    broadcast_weights(&mut learner, &mut actors, &mut graph)?;
+    let mut eval = SerialEval::new(config)?;
+    eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
     let mut last_episodes = 0;
     while !budget_reached(config, &learner) {
         for (actor, line) in actors.iter_mut().zip(&mut actor_lines) {
@@ -47,14 +51,14 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             graph.ingest(&chunk.header, &chunk.records)?;
         }
         catch_up(&mut learner)?;
-        broadcast_weights(&mut learner, &mut actors, &mut graph)?;
+        eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
         let episodes = learner.ingest_stats().episodes_completed;
         if episodes != last_episodes {
-            write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines)?;
+            write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest)?;
             last_episodes = episodes;
         }
     }
-    write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines)?;
+    write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest)?;
     metrics.flush()?;
     tracing::info!(env_steps = learner.progress().env_steps_ingested, "serial run finished");
     Ok(())
@@ -81,14 +85,60 @@ fn catch_up(learner: &mut Learner) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn broadcast_weights(learner: &mut Learner, actors: &mut [Actor], graph: &mut GraphService) -> anyhow::Result<()> {
-    if let Some((header, bytes)) = learner.publish_due()? {
+/// Publishes due weights to every component; returns them for the evaluator.
+fn broadcast_weights(
+    learner: &mut Learner,
+    actors: &mut [Actor],
+    graph: &mut GraphService,
+) -> anyhow::Result<Option<(protocol::WeightsHeader, Vec<u8>)>> {
+    let published = learner.publish_due()?;
+    if let Some((header, bytes)) = &published {
         for actor in actors.iter_mut() {
-            actor.load_weights(&header, &bytes)?;
+            actor.load_weights(header, bytes)?;
         }
-        graph.load_weights(&header, &bytes)?;
+        graph.load_weights(header, bytes)?;
     }
-    Ok(())
+    Ok(published)
+}
+
+/// The evaluator of serial mode: the process mode's schedule and outputs, run inline on the
+/// weights of the broadcast at which an evaluation falls due.
+struct SerialEval {
+    evaluator: Option<Evaluator>,
+    schedule: EvalSchedule,
+    n_episodes: u32,
+    /// The latest evaluation's metrics, repeated on every line (as the launcher keeps them).
+    latest: Vec<(String, f64)>,
+}
+
+impl SerialEval {
+    fn new(config: &protocol::Config) -> anyhow::Result<Self> {
+        let evaluator = if config.eval.n_episodes > 0 {
+            Some(Evaluator::new(config, config.run.seed ^ 0xE7A1).context("building the evaluator")?)
+        } else {
+            None
+        };
+        Ok(Self {
+            evaluator,
+            schedule: EvalSchedule::new(config.eval.interval_episodes),
+            n_episodes: config.eval.n_episodes,
+            latest: Vec::new(),
+        })
+    }
+
+    fn on_weights(&mut self, ctx: &RunContext, published: Option<(protocol::WeightsHeader, Vec<u8>)>) -> anyhow::Result<()> {
+        let (Some(evaluator), Some((header, bytes))) = (self.evaluator.as_mut(), published) else {
+            return Ok(());
+        };
+        let Some(index) = self.schedule.due(header.schedule.train_episodes) else {
+            return Ok(());
+        };
+        evaluator.load_weights(&header, &bytes)?;
+        let report = evaluator.run(index, self.n_episodes)?;
+        append_report(ctx, &report, &header)?;
+        self.latest = eval_metrics(&report, &header, self.schedule.skipped(), 0);
+        Ok(())
+    }
 }
 
 /// The in-process graph-service as the actors' transport: its request handler, called directly.
@@ -115,6 +165,7 @@ fn write_line(
     graph: &GraphService,
     actors: &[Actor],
     lines: &mut [ActorLine],
+    eval: &[(String, f64)],
 ) -> anyhow::Result<()> {
     let mut object = serde_json::Map::new();
     for (name, value) in learner.metrics() {
@@ -131,6 +182,9 @@ fn write_line(
         }
     }
     object.insert("graph-service/graph/stored_steps".to_owned(), serde_json::json!(graph.stats().stored_steps));
+    for (name, value) in eval {
+        object.insert(format!("evaluator0/{name}"), serde_json::json!(value));
+    }
     writeln!(out, "{}", serde_json::Value::Object(object))?;
     Ok(())
 }

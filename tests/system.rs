@@ -235,7 +235,8 @@ fn a_killed_actor_is_restarted_and_the_run_continues() {
 #[test]
 fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let short = ["--serial", "--set", "run.max_episodes=6", "--seed", "5"];
+    let eval = ["--set", "eval.interval_episodes=2", "--set", "eval.n_episodes=1"];
+    let short = [&["--serial", "--set", "run.max_episodes=6", "--seed", "5"][..], &eval[..]].concat();
     let mut first = Run::start("serial-a", &short);
     assert!(first.wait().success());
     let mut second = Run::start("serial-b", &short);
@@ -245,7 +246,12 @@ fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
     assert!(a.lines().count() >= 3, "a line whenever episodes completed: {a}");
     assert!(a.contains("losses/low_critic"), "training ran: {a}");
     assert_eq!(a, b, "same seed, same metrics");
-    let mut other = Run::start("serial-c", &["--serial", "--set", "run.max_episodes=6", "--seed", "6"]);
+    assert!(a.contains("evaluator0/eval/success_rate"), "evaluations ran inline: {a}");
+    let evals = std::fs::read_to_string(first.dir.join("eval.jsonl")).unwrap();
+    assert!(evals.lines().count() >= 2, "evaluations at 2, 4, 6 episodes: {evals}");
+    assert_eq!(evals, std::fs::read_to_string(second.dir.join("eval.jsonl")).unwrap());
+    let other_args = [&["--serial", "--set", "run.max_episodes=6", "--seed", "6"][..], &eval[..]].concat();
+    let mut other = Run::start("serial-c", &other_args);
     assert!(other.wait().success());
     let c = std::fs::read_to_string(other.dir.join("metrics.jsonl")).unwrap();
     assert_ne!(a, c, "another seed gives another run");

@@ -114,7 +114,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     )
 }
 
-fn eval_metrics(report: &EvalReport, header: &WeightsHeader, skipped: u64, rejected: u64) -> Vec<(String, f64)> {
+pub fn eval_metrics(report: &EvalReport, header: &WeightsHeader, skipped: u64, rejected: u64) -> Vec<(String, f64)> {
     vec![
         ("eval/success_rate".to_owned(), report.success_rate),
         ("eval/mean_final_distance".to_owned(), report.mean_final_distance),
@@ -129,7 +129,7 @@ fn eval_metrics(report: &EvalReport, header: &WeightsHeader, skipped: u64, rejec
 }
 
 /// One JSON line per evaluation in `run_dir/eval.jsonl`.
-fn append_report(ctx: &RunContext, report: &EvalReport, header: &WeightsHeader) -> anyhow::Result<()> {
+pub fn append_report(ctx: &RunContext, report: &EvalReport, header: &WeightsHeader) -> anyhow::Result<()> {
     let path = ctx.run_dir.join("eval.jsonl");
     let mut file = OpenOptions::new().create(true).append(true).open(&path).with_context(|| format!("opening {}", path.display()))?;
     let line = serde_json::json!({
