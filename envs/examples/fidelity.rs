@@ -5,7 +5,7 @@
 //! [key=value ...]]`. `--trace-gait` also prints the gait's per-step torso pose and hinge
 //! angles to stderr.
 //! `key=value` overrides one Ant parameter for tuning experiments, e.g. `solver.substeps=4`
-//! (see [`apply_override`] for the keys). Without arguments it runs the full protocol with the
+//! (see `common/ant_overrides.rs` for the keys). Without arguments it runs the full protocol with the
 //! default parameters.
 //!
 //! Protocol (shared with the MuJoCo script; actions in actuator order hip_4, ankle_4, hip_1,
@@ -32,6 +32,10 @@ use std::time::Instant;
 
 use envs::ant::{Ant, AntParams, N_JOINTS, QPOS_DIM, QVEL_DIM};
 use envs::{EnvError, Robot};
+
+#[path = "common/ant_overrides.rs"]
+mod ant_overrides;
+use ant_overrides::{apply_override, bad_arg};
 
 /// Gait test length and its phase clock: τ = GAIT_TAU_PER_STEP · t.
 const GAIT_STEPS: usize = 50;
@@ -129,37 +133,6 @@ fn parse_args() -> Result<Args, EnvError> {
     }
     parsed.params.validate()?;
     Ok(parsed)
-}
-
-/// Sets one tunable parameter from text.
-fn apply_override(params: &mut AntParams, key: &str, value: &str) -> Result<(), EnvError> {
-    let float = || value.parse::<f32>().map_err(|_| bad_arg(key, value));
-    let count = || value.parse::<usize>().map_err(|_| bad_arg(key, value));
-    let solver = &mut params.solver;
-    match key {
-        "timestep_secs" => params.timestep_secs = float()?,
-        "frame_skip" => params.frame_skip = count()? as u32,
-        "friction" => params.friction = float()?,
-        "solver.substeps" => solver.substeps = count()?,
-        "solver.pgs_iterations" => solver.pgs_iterations = count()?,
-        "solver.stabilization_iterations" => solver.stabilization_iterations = count()?,
-        "solver.contact_frequency_hz" => solver.contact_frequency_hz = float()?,
-        "solver.contact_damping_ratio" => solver.contact_damping_ratio = float()?,
-        "solver.contact_skin_m" => solver.contact_skin_m = float()?,
-        "solver.joint_limit_frequency_hz" => solver.joint_limit_frequency_hz = float()?,
-        "solver.joint_limit_damping_ratio" => solver.joint_limit_damping_ratio = float()?,
-        "solver.max_corrective_velocity_m_s" => solver.max_corrective_velocity_m_s = float()?,
-        _ => return Err(bad_arg(key, value)),
-    }
-    Ok(())
-}
-
-fn bad_arg(key: &str, value: &str) -> EnvError {
-    EnvError::InvalidParam {
-        field: key.to_string(),
-        value: value.to_string(),
-        reason: "unknown argument or unparsable value (see envs/examples/fidelity.rs)".into(),
-    }
 }
 
 /// An ant at qpos0 with zero velocity.

@@ -12,8 +12,9 @@
 //! - Nothing here is random: the same inputs build the same world.
 
 use rapier3d::prelude::{
-    ColliderBuilder, Group, IntegrationParameters, InteractionGroups, InteractionTestMode,
-    PhysicsWorld, RigidBodyBuilder, SharedShape, SpringCoefficients, Vector,
+    BroadPhaseBvh, BvhOptimizationStrategy, ColliderBuilder, Group, IntegrationParameters,
+    InteractionGroups, InteractionTestMode, PhysicsWorld, RigidBodyBuilder, SharedShape,
+    SpringCoefficients, Vector,
 };
 use serde::{Deserialize, Serialize};
 
@@ -71,6 +72,15 @@ pub struct SolverParams {
     /// Largest speed at which penetration is pushed out. Default 3. Unit: m/s.
     /// Source: rapier default.
     pub max_corrective_velocity_m_s: f32,
+    /// Continuous collision detection: at most this many CCD substeps per physics step (rapier
+    /// `max_ccd_substeps`); 0 turns rapier's automatic CCD of fast bodies against fixed
+    /// colliders off. Default 1. Unit: count. Source: rapier default.
+    pub ccd_max_substeps: usize,
+    /// Whether rapier re-optimises its broad-phase tree incrementally after each step (rapier
+    /// `BvhOptimizationStrategy::SubtreeOptimizer`; `false` selects `None`). The tree only
+    /// speeds up the search for overlapping bounding boxes; it never changes which pairs
+    /// overlap. Default true. Unit: switch. Source: rapier default.
+    pub broad_phase_optimization: bool,
 }
 
 impl Default for SolverParams {
@@ -85,6 +95,8 @@ impl Default for SolverParams {
             joint_limit_frequency_hz: 1.0e6,
             joint_limit_damping_ratio: 1.0,
             max_corrective_velocity_m_s: 3.0,
+            ccd_max_substeps: 1,
+            broad_phase_optimization: true,
         }
     }
 }
@@ -145,6 +157,7 @@ impl SolverParams {
             contact_softness: contact,
             static_contact_softness: contact,
             normalized_max_corrective_velocity: self.max_corrective_velocity_m_s,
+            max_ccd_substeps: self.ccd_max_substeps,
             ..IntegrationParameters::default()
         }
     }
@@ -205,6 +218,13 @@ pub fn new_world(timestep_secs: f32, gravity_m_s2: f32, solver: &SolverParams) -
     PhysicsWorld {
         gravity: Vector::new(0.0, 0.0, -gravity_m_s2),
         integration_parameters: solver.integration_parameters(timestep_secs),
+        broad_phase: BroadPhaseBvh::with_optimization_strategy(
+            if solver.broad_phase_optimization {
+                BvhOptimizationStrategy::SubtreeOptimizer
+            } else {
+                BvhOptimizationStrategy::None
+            },
+        ),
         ..PhysicsWorld::default()
     }
 }

@@ -222,6 +222,29 @@ fn the_same_seed_gives_the_same_trajectory() {
 }
 
 #[test]
+fn skipping_broad_phase_tree_optimisation_leaves_the_trajectory_on_the_floor_unchanged() {
+    // The shipped default turns rapier's broad-phase re-optimisation off for speed; on the
+    // floor (where the fidelity figures are measured) it must not change a single number.
+    // Among walls the tree's shape can reorder contact pairs, which changes f32 rounding only.
+    let run = |params: AntParams| {
+        let mut ant = Ant::new(params, &[]).expect("valid");
+        ant.reset(&mut Pcg64Mcg::seed_from_u64(5));
+        let mut actions = Pcg64Mcg::seed_from_u64(6);
+        (0..60)
+            .map(|_| {
+                ant.step(&random_action(&mut actions, 16.0));
+                obs(&ant)
+            })
+            .collect::<Vec<_>>()
+    };
+    let shipped = AntParams::default();
+    assert!(!shipped.solver.broad_phase_optimization);
+    let mut rapier_default = shipped.clone();
+    rapier_default.solver.broad_phase_optimization = true;
+    assert_eq!(run(shipped), run(rapier_default));
+}
+
+#[test]
 fn invalid_parameters_are_rejected_with_their_field_names() {
     let params = AntParams {
         density_kg_m3: -1.0,
