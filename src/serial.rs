@@ -18,7 +18,7 @@ use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
 use protocol::ActorId;
 
 use crate::proc::actor::{actor_metrics, ReachMeans};
-use crate::proc::common::task_info;
+use crate::proc::common::{task_info, CoverageTracker};
 use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
 use crate::run::RunContext;
 
@@ -40,6 +40,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let mut metrics = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
     let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
     let mut eval = SerialEval::new(config)?;
+    let mut coverage = CoverageTracker::new(config, task.layout)?;
     eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
     let mut last_episodes = 0;
     while !budget_reached(config, &learner) {
@@ -48,17 +49,18 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             let chunk = actor.next_chunk(&mut ServiceOracle::new(InProcessGraph(&mut graph)))?;
             line.published_steps += u64::from(chunk.header.n_steps);
             learner.ingest(&chunk.header, &chunk.records)?;
+            coverage.observe(&chunk.records);
             graph.ingest(&chunk.header, &chunk.records)?;
         }
         catch_up(&mut learner)?;
         eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
         let episodes = learner.ingest_stats().episodes_completed;
         if episodes != last_episodes {
-            write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest)?;
+            write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
             last_episodes = episodes;
         }
     }
-    write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest)?;
+    write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
     metrics.flush()?;
     tracing::info!(env_steps = learner.progress().env_steps_ingested, "serial run finished");
     Ok(())
@@ -166,12 +168,16 @@ fn write_line(
     actors: &[Actor],
     lines: &mut [ActorLine],
     eval: &[(String, f64)],
+    coverage: &CoverageTracker,
 ) -> anyhow::Result<()> {
     let mut object = serde_json::Map::new();
     for (name, value) in learner.metrics() {
         if !name.contains("per_sec") {
             object.insert(format!("learner/{name}"), serde_json::json!(value));
         }
+    }
+    for (name, value) in coverage.metrics() {
+        object.insert(format!("learner/{name}"), serde_json::json!(value));
     }
     for (i, (actor, line)) in actors.iter().zip(lines.iter_mut()).enumerate() {
         let stats = actor.stats();

@@ -177,6 +177,10 @@ fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() 
     }
     assert!(run.dir.join("config.resolved.toml").exists());
     assert!(learner_steps_in_metrics(&run.dir) > 0, "metrics.jsonl has learner progress");
+    // Coverage of the training data, a fraction of the maze's free cells.
+    let last: Value = serde_json::from_str(std::fs::read_to_string(run.dir.join("metrics.jsonl")).unwrap().lines().last().unwrap()).unwrap();
+    let coverage = last["learner/charts/coverage"].as_f64().expect("coverage metric");
+    assert!(coverage > 0.0 && coverage <= 1.0, "coverage {coverage}");
     // The evaluator evaluated published weights at least once and wrote its outputs.
     let evals = std::fs::read_to_string(run.dir.join("eval.jsonl")).unwrap_or_default();
     let first: Value = serde_json::from_str(evals.lines().next().expect("an evaluation ran")).unwrap();
@@ -247,6 +251,7 @@ fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
     assert!(a.contains("losses/low_critic"), "training ran: {a}");
     assert_eq!(a, b, "same seed, same metrics");
     assert!(a.contains("evaluator0/eval/success_rate"), "evaluations ran inline: {a}");
+    assert!(a.contains("learner/charts/coverage"), "coverage in serial mode: {a}");
     let evals = std::fs::read_to_string(first.dir.join("eval.jsonl")).unwrap();
     assert!(evals.lines().count() >= 2, "evaluations at 2, 4, 6 episodes: {evals}");
     assert_eq!(evals, std::fs::read_to_string(second.dir.join("eval.jsonl")).unwrap());

@@ -114,3 +114,45 @@ pub fn newest_weights(weights: &crate::channels::WeightsSubscriber) -> Option<(p
     }
     newest
 }
+
+/// The xy coverage of the training data (SPEC §7, digest §10): every achieved position of every
+/// stored step, on the maze's 0.6 m coverage grid (`envs::Coverage`, cumulative, visited free
+/// cells / free cells). Tasks without a maze have no coverage.
+pub struct CoverageTracker {
+    coverage: Option<envs::Coverage>,
+    layout: StepLayout,
+}
+
+impl CoverageTracker {
+    pub fn new(config: &Config, layout: StepLayout) -> anyhow::Result<Self> {
+        let options = envs::EnvOptions { max_steps: config.env.episode_length };
+        let env = envs::make_with(&config.env.task, options).with_context(|| format!("building task `{}`", config.env.task))?;
+        Ok(Self { coverage: env.maze().map(envs::Coverage::new), layout })
+    }
+
+    /// Counts the achieved xy of every record of an accepted chunk payload (records that do not
+    /// decode were refused by the learner already and are skipped here).
+    pub fn observe(&mut self, payload: &[f32]) {
+        let Some(coverage) = self.coverage.as_mut() else { return };
+        let len = self.layout.record_len();
+        if len == 0 || self.layout.goal_dim < 2 {
+            return;
+        }
+        for record in payload.chunks_exact(len) {
+            if let Ok(view) = self.layout.view(record) {
+                coverage.visit([view.achieved_goal[0], view.achieved_goal[1]]);
+            }
+        }
+    }
+
+    /// `charts/coverage` and `charts/coverage_free_cells_visited`, if the task has a maze.
+    pub fn metrics(&self) -> Vec<(String, f64)> {
+        match &self.coverage {
+            Some(c) => vec![
+                ("charts/coverage".to_owned(), c.coverage()),
+                ("charts/coverage_free_cells_visited".to_owned(), c.n_visited_free_cells() as f64),
+            ],
+            None => Vec::new(),
+        }
+    }
+}

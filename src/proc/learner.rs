@@ -10,7 +10,7 @@ use learner::Learner;
 use protocol::transport::{Ipc, ValuePublisher};
 use protocol::{ControlCommand, ProcessRole, ProgressMessage, PROTOCOL_VERSION};
 
-use super::common::{node, task_info, MetricsOut, StopWatch};
+use super::common::{node, task_info, CoverageTracker, MetricsOut, StopWatch};
 use crate::channels::{Channels, WeightsPublisher};
 use crate::run::RunContext;
 
@@ -25,6 +25,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
     let task = task_info(config)?;
     let layout = task.layout;
+    let mut coverage = CoverageTracker::new(config, layout)?;
     let mut learner = Learner::with_episode_length(config, task.dims, task.episode_length, config.run.seed).context("building the learner")?;
     let node = node(ctx, "learner")?;
     let channels = Channels::new(config, &ctx.run_id, &layout);
@@ -48,7 +49,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         if let Some(reason) = stop.should_stop(&node).or_else(|| stop_requested(&control)) {
             break reason;
         }
-        ingest_all(&mut learner, &trajectories);
+        ingest_all(&mut learner, &mut coverage, &trajectories);
         busy = learner.train(UPDATES_PER_TICK)? > 0;
         publish_weights(&mut learner, &channels, &node, &mut weights)?;
         send_progress(&progress, &learner)?;
@@ -57,21 +58,20 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             last_reconnect = Instant::now();
         }
         if metrics.due() {
-            metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner));
+            metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner, &coverage));
         }
     };
     // Actors are stopped first; whatever they sent is in our buffer: take it before leaving.
-    ingest_all(&mut learner, &trajectories);
-    metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner));
+    ingest_all(&mut learner, &mut coverage, &trajectories);
+    metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner, &coverage));
     tracing::info!(reason, "learner stopping");
     write_final_status(ctx, &learner, reason)
 }
 
-fn ingest_all(learner: &mut Learner, trajectories: &crate::channels::TrajectorySubscriber) {
-    let drained = trajectories.drain(|header, payload| {
-        if let Err(err) = learner.ingest(header, payload) {
-            tracing::warn!("rejected a trajectory chunk: {err:#}");
-        }
+fn ingest_all(learner: &mut Learner, coverage: &mut CoverageTracker, trajectories: &crate::channels::TrajectorySubscriber) {
+    let drained = trajectories.drain(|header, payload| match learner.ingest(header, payload) {
+        Ok(_) => coverage.observe(payload),
+        Err(err) => tracing::warn!("rejected a trajectory chunk: {err:#}"),
     });
     if let Err(err) = drained {
         tracing::warn!("receiving trajectories failed: {err:#}");
@@ -121,8 +121,10 @@ fn reconnect(progress: &ValuePublisher<ProgressMessage>, weights: Option<&Weight
     }
 }
 
-fn learner_metrics(learner: &Learner) -> Vec<(String, f64)> {
-    learner.metrics().into_iter().map(|(k, v)| (k.to_owned(), v)).collect()
+fn learner_metrics(learner: &Learner, coverage: &CoverageTracker) -> Vec<(String, f64)> {
+    let mut values: Vec<(String, f64)> = learner.metrics().into_iter().map(|(k, v)| (k.to_owned(), v)).collect();
+    values.extend(coverage.metrics());
+    values
 }
 
 fn write_final_status(ctx: &RunContext, learner: &Learner, reason: &str) -> anyhow::Result<()> {
