@@ -44,6 +44,55 @@ pub enum Command {
 pub enum BenchCommand {
     /// Control steps per second of one environment on one thread, random actions.
     Env(BenchEnvArgs),
+    /// Transport speed between real processes: trajectory chunks, weights broadcast and
+    /// request–response over iceoryx2, each beside the same bytes over a Unix domain socket.
+    Ipc(BenchIpcArgs),
+    /// (spawned by `asi bench ipc`) One sending or receiving process of an IPC measurement.
+    #[command(hide = true, name = "ipc-worker")]
+    IpcWorker(BenchIpcWorkerArgs),
+    /// End-to-end speed of real `asi train` runs for several actor counts: env steps/s,
+    /// learner updates/s, policy lag and CPU cores used.
+    System(BenchSystemArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct BenchIpcArgs {
+    /// Seconds each measurement runs (each is done once per transport).
+    #[arg(long, default_value_t = 3.0)]
+    pub seconds: f64,
+    /// Env steps per trajectory chunk (`transport.chunk_steps`; default as in the default config).
+    #[arg(long, default_value_t = 100)]
+    pub chunk_steps: u32,
+    /// Task whose step-record layout the chunks use (repeatable; see `asi tasks`). Default:
+    /// pointmaze-u and antmaze-u.
+    #[arg(long = "task", value_name = "T")]
+    pub tasks: Vec<String>,
+}
+
+/// What `asi bench ipc` hands one of its worker processes.
+#[derive(Debug, Args)]
+pub struct BenchIpcWorkerArgs {
+    /// The worker's job as JSON (written by `asi bench ipc`, not meant to be typed).
+    #[arg(long)]
+    pub spec: String,
+}
+
+#[derive(Debug, Args)]
+pub struct BenchSystemArgs {
+    /// Actor counts to measure, comma-separated, each a separate run (e.g. `1,2,4`).
+    #[arg(long, default_value = "1,2,4", value_parser = crate::bench::system::parse_actor_counts)]
+    pub actors: crate::bench::system::ActorCounts,
+    /// Seconds of steady state measured per actor count (after the warm-up).
+    #[arg(long, default_value_t = 30.0)]
+    pub seconds: f64,
+    /// Seconds waited once the run is past start-up (the learner has data and the throttle
+    /// lets actors send again), before measuring.
+    #[arg(long, default_value_t = 5.0)]
+    pub warmup_secs: f64,
+    /// TOML config of the runs (copied into each run folder); default: the embedded
+    /// `configs/smoke.toml` (PointMaze-U, tiny networks). Its budget is lifted so runs last.
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
 }
 
 #[derive(Debug, Args)]
