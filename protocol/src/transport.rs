@@ -7,9 +7,14 @@
 //! spinning process starves the others.
 //!
 //! Invariants:
-//! - `send` never blocks forever: subscribers with full buffers are handled by the configured
-//!   [`Backpressure`] (drop the sample for that subscriber, counted by iceoryx2, or retry until
-//!   a deadline), never by an unbounded retry.
+//! - `send` never blocks: services are created with iceoryx2's default *safe overflow*, so a
+//!   subscriber whose buffer is full loses its **oldest** buffered sample to the new one, and the
+//!   configured [`Backpressure`] strategy never comes into play (iceoryx2 applies it only with
+//!   safe overflow off). Data channels are therefore sized so that a full buffer cannot happen
+//!   in normal operation (trajectories: 1,024 chunks per subscriber, far above what the
+//!   learner's replay-ratio throttle lets the actors put in flight), and receivers detect any
+//!   loss from chunk-index gaps (`ingest/lost_chunks`). A bounded blocking mode (safe overflow
+//!   off, retry with a deadline) is issue #7's work.
 //! - Payload lengths are checked against the channel's maximum before loaning memory, and a
 //!   too-long payload is an error value, not a panic.
 
@@ -56,7 +61,8 @@ pub enum TransportError {
 /// What a publisher does when a subscriber's buffer is full.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Backpressure {
-    /// Deliver to everyone who has room; a full subscriber misses this sample.
+    /// Deliver to everyone who has room. With safe overflow (the default of every service
+    /// here) a full subscriber instead drops its oldest sample; see the module invariants.
     Discard,
     /// Keep retrying until the subscriber makes room (bounded by the caller's own deadline
     /// through the subscriber buffer size; use only where the consumer is known to be alive).
