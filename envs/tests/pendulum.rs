@@ -108,7 +108,7 @@ fn episodes_truncate_after_200_steps_and_then_refuse_to_step() {
         let step = env.step(&[0.5]).unwrap();
         assert!(!step.terminated);
         assert_eq!(step.truncated, i == 200, "step {i}");
-        assert!(step.reward <= 0.0 && step.reward >= -16.2736044);
+        assert!(step.reward <= 0.0 && step.reward >= -16.273_605);
     }
     assert!(matches!(env.step(&[0.0]), Err(EnvError::NotReady { .. })));
     env.reset(4);
