@@ -9,6 +9,8 @@
 
 #[path = "bench_ipc.rs"]
 pub mod ipc;
+#[path = "bench_learner.rs"]
+pub mod learner;
 #[path = "bench_system.rs"]
 pub mod system;
 
@@ -22,6 +24,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Ipc(args) => ipc::run(&args),
         BenchCommand::IpcWorker(args) => ipc::run_worker(&args.spec),
         BenchCommand::System(args) => system::run(&args),
+        BenchCommand::Learner(args) => learner::run(&args),
         BenchCommand::Graph(args) => crate::bench_graph::run(&args),
     }
 }

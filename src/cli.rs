@@ -53,6 +53,13 @@ pub enum BenchCommand {
     /// End-to-end speed of real `asi train` runs for several actor counts: env steps/s,
     /// learner updates/s, policy lag and CPU cores used.
     System(BenchSystemArgs),
+    /// SAC updates/s of both levels at the paper's shapes, the time of one φ round and the FLOP
+    /// rate, each beside the same update in PyTorch (scripts/bench_learner_torch.py) as a ratio.
+    Learner(crate::bench::learner::BenchLearnerArgs),
+    /// Graph-service speed on synthetic trajectories: rebuild for 1 M and 10 M stored steps
+    /// (φ re-mapping and graph construction apart), route latency at 5,000 nodes, and scipy's
+    /// shortest paths on the same graph side by side.
+    Graph(crate::bench_graph::BenchGraphArgs),
 }
 
 #[derive(Debug, Args)]
@@ -181,12 +188,51 @@ pub struct GraphArgs {
     /// Run folder of a running `asi train`.
     #[arg(long)]
     pub run_dir: std::path::PathBuf,
+    /// Seconds to wait for the graph-service's answer (it answers between trajectory chunks
+    /// and graph rebuilds).
+    #[arg(long, default_value_t = 10.0)]
+    pub timeout_secs: f64,
     #[command(subcommand)]
     pub command: GraphCommand,
 }
 
-#[derive(Debug, Clone, Copy, Subcommand)]
+/// Questions `asi graph` can ask. Points are `X,Y` in φ-space (e.g. `--from=-3.5,4`).
+#[derive(Debug, Clone, Subcommand)]
 pub enum GraphCommand {
     /// Graph size and trajectory store counts.
     Stats,
+    /// A random frontier node seen from the cell of a point, and the route to it.
+    Frontier {
+        /// Start point X,Y.
+        #[arg(long, allow_hyphen_values = true, value_parser = crate::graph_tool::parse_point)]
+        from: [f32; 2],
+    },
+    /// The shortest route between the cells of two points.
+    Route {
+        /// Start point X,Y.
+        #[arg(long, allow_hyphen_values = true, value_parser = crate::graph_tool::parse_point)]
+        from: [f32; 2],
+        /// End point X,Y.
+        #[arg(long, allow_hyphen_values = true, value_parser = crate::graph_tool::parse_point)]
+        to: [f32; 2],
+    },
+    /// HESS's count-based exploration subgoal near a point.
+    Explore {
+        /// φ(s_t) X,Y.
+        #[arg(long, allow_hyphen_values = true, value_parser = crate::graph_tool::parse_point)]
+        from: [f32; 2],
+        /// Training episode index (the potential term and the push apply after
+        /// `exploration.potential_start_episode`).
+        #[arg(long, default_value_t = 0)]
+        episode: u64,
+    },
+    /// Draw the graph (nodes coloured by visit count, edges, a frontier and its route) to a PNG.
+    Dump {
+        /// Output PNG file.
+        #[arg(long)]
+        png: std::path::PathBuf,
+        /// Start of the drawn frontier route X,Y (default: node 0, the oldest cell).
+        #[arg(long, allow_hyphen_values = true, value_parser = crate::graph_tool::parse_point)]
+        from: Option<[f32; 2]>,
+    },
 }

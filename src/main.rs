@@ -2,8 +2,10 @@
 //! errors to an exit code with the whole error chain printed.
 
 mod bench;
+mod bench_graph;
 mod channels;
 mod cli;
+mod graph_png;
 mod graph_tool;
 mod launcher;
 mod plot;

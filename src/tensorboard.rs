@@ -100,6 +100,7 @@ impl EventWriter {
     }
 
     /// The file being written.
+    #[cfg_attr(not(test), allow(dead_code))]
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -196,6 +197,7 @@ fn put_float(out: &mut Vec<u8>, field: u32, value: f32) {
 
 /// One event read back from a file.
 #[derive(Debug, Clone, PartialEq, Default)]
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 pub struct Event {
     /// Seconds since the Unix epoch.
     pub wall_time: f64,
@@ -208,6 +210,7 @@ pub struct Event {
 }
 
 /// Reads every event of a file written by [`EventWriter`], checking both CRCs of every record.
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 pub fn read_events(path: &Path) -> anyhow::Result<Vec<Event>> {
     let mut bytes = Vec::new();
     File::open(path)
@@ -247,6 +250,7 @@ pub fn read_events(path: &Path) -> anyhow::Result<Vec<Event>> {
 }
 
 /// A protobuf field as read: number and value.
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 enum Field<'a> {
     Varint(u64),
     Fixed64([u8; 8]),
@@ -254,6 +258,7 @@ enum Field<'a> {
     Fixed32([u8; 4]),
 }
 
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn take_varint(data: &mut &[u8]) -> anyhow::Result<u64> {
     let mut value = 0u64;
     for shift in (0..64).step_by(7) {
@@ -267,6 +272,7 @@ fn take_varint(data: &mut &[u8]) -> anyhow::Result<u64> {
     bail!("varint longer than 10 bytes")
 }
 
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn take<'a>(data: &mut &'a [u8], n: usize) -> anyhow::Result<&'a [u8]> {
     ensure!(
         data.len() >= n,
@@ -278,6 +284,7 @@ fn take<'a>(data: &mut &'a [u8], n: usize) -> anyhow::Result<&'a [u8]> {
     Ok(head)
 }
 
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn next_field<'a>(data: &mut &'a [u8]) -> anyhow::Result<(u64, Field<'a>)> {
     let key = take_varint(data)?;
     let field = match key & 7 {
@@ -293,6 +300,7 @@ fn next_field<'a>(data: &mut &'a [u8]) -> anyhow::Result<(u64, Field<'a>)> {
     Ok((key >> 3, field))
 }
 
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn decode_event(mut data: &[u8]) -> anyhow::Result<Event> {
     let mut event = Event::default();
     while !data.is_empty() {
@@ -307,6 +315,7 @@ fn decode_event(mut data: &[u8]) -> anyhow::Result<Event> {
     Ok(event)
 }
 
+#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn decode_summary(mut data: &[u8], scalars: &mut Vec<(String, f32)>) -> anyhow::Result<()> {
     while !data.is_empty() {
         if let (1, Field::Bytes(mut value)) = next_field(&mut data)? {
