@@ -17,7 +17,7 @@ use protocol::graph::{RouteAnswer, RouteQuery};
 use protocol::LatentPoint;
 use rand::Rng;
 
-use crate::dijkstra::shortest_paths;
+use crate::dijkstra::{shortest_path_to, shortest_paths};
 use crate::graph::{LatentGraph, NodeId};
 
 /// Why there is no route or frontier.
@@ -101,9 +101,7 @@ pub fn route_between(
     from: NodeId,
     to: NodeId,
 ) -> Result<Vec<NodeId>, NoRoute> {
-    shortest_paths(graph.adjacency(), from)
-        .path_to(to)
-        .ok_or(NoRoute::Unreachable { from, to })
+    shortest_path_to(graph.adjacency(), from, to).ok_or(NoRoute::Unreachable { from, to })
 }
 
 /// A uniformly random node farther than `fraction × max` from the cell of `from`, with the
