@@ -74,6 +74,7 @@ fn payload_types_have_explicit_names_and_no_implicit_padding() {
             GraphRequestHeader::type_name(),
             GraphResponseHeader::type_name(),
             ActorId::type_name(),
+            RunSchedule::type_name(),
         ]
     };
     assert_eq!(
@@ -86,10 +87,12 @@ fn payload_types_have_explicit_names_and_no_implicit_padding() {
             "asi::GraphRequestHeader",
             "asi::GraphResponseHeader",
             "asi::ActorId",
+            "asi::RunSchedule",
         ]
     );
     assert_eq!(std::mem::size_of::<TrajectoryHeader>(), 4 * 8 + 10 * 4);
-    assert_eq!(std::mem::size_of::<WeightsHeader>(), 4 * 8 + 2 * 4);
+    assert_eq!(std::mem::size_of::<RunSchedule>(), 8 + 2 * 4);
+    assert_eq!(std::mem::size_of::<WeightsHeader>(), 4 * 8 + 2 * 4 + (8 + 2 * 4));
     assert_eq!(std::mem::size_of::<GraphRequestHeader>(), 2 * 8 + 2 * 4);
     assert_eq!(std::mem::size_of::<GraphResponseHeader>(), 3 * 8 + 4 * 4);
     assert_eq!(
