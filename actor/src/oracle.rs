@@ -103,7 +103,9 @@ impl<T: GraphTransport> ServiceOracle<T> {
     }
 
     /// Sends `request`; the decoded answer when the status is `Ok`, `None` (logged) otherwise.
-    fn ask(&mut self, request: &GraphRequest, phi_version: PhiVersion) -> Option<GraphResponse> {
+    /// Public so other clients of the graph-service (the learner's self-imitation routes) share
+    /// the encoding and status handling.
+    pub fn ask(&mut self, request: &GraphRequest, phi_version: PhiVersion) -> Option<GraphResponse> {
         let kind = request.kind();
         let header = GraphRequestHeader::new(self.next_request_id, kind, phi_version);
         self.next_request_id = self.next_request_id.wrapping_add(1);
