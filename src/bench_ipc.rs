@@ -969,7 +969,7 @@ fn rpc_bodies() -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
     let route: Vec<[f32; 2]> = (0..RPC_ROUTE_LEN)
         .map(|i| [i as f32 * 0.5, 1.0 - i as f32 * 0.25])
         .collect();
-    let answer = GraphResponse::FrontierRoute(Some(FrontierRoute {
+    let answer = GraphResponse::FrontierRoute(Ok(FrontierRoute {
         frontier: route[RPC_ROUTE_LEN - 1],
         route,
         distance: 3.5,

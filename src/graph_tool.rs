@@ -11,16 +11,16 @@
 //!   frontier and its route computed for the picture from `--from` (default: node 0, the
 //!   oldest cell, which is where the first episodes started).
 //!
-//! When the service answers "no frontier" or "no route" (the wire answer carries no reason),
-//! the tool asks for a dump and says why: the start or end cell is not a node, or nothing is
-//! reachable from it.
+//! When the service answers "no frontier" or "no route", the tool prints the reason the answer
+//! carries (`reason: <code> (<meaning>)`, the code a [`NoRouteReason`] variant: `EmptyGraph`,
+//! `StartUnknown`, `EndUnknown`, `Unreachable`, `NothingReachable`).
 
 use std::path::Path;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
 use protocol::graph::{
-    FrontierRoute, GraphDump, GraphRequest, GraphRequestHeader, GraphResponse, GraphStatus,
+    FrontierRoute, GraphRequest, GraphRequestHeader, GraphResponse, GraphStatus, NoRouteReason,
     RouteAnswer, RouteQuery,
 };
 use protocol::transport::open_node;
@@ -59,8 +59,14 @@ pub fn run(args: &GraphArgs) -> anyhow::Result<()> {
     let ctx = RunContext::open(&args.run_dir, run_id.as_str())?;
     let node = open_node(&run_id.node_name(&format!("graph-tool-{}", std::process::id())))?;
     let layout = crate::proc::common::task_info(&ctx.config)?.layout;
-    let client = crate::channels::Channels::new(&ctx.config, &run_id, &layout).graph_client(&node)?;
-    let mut session = Session { run_id, client, timeout: Duration::from_secs_f64(args.timeout_secs), next_id: 0 };
+    let client =
+        crate::channels::Channels::new(&ctx.config, &run_id, &layout).graph_client(&node)?;
+    let mut session = Session {
+        run_id,
+        client,
+        timeout: Duration::from_secs_f64(args.timeout_secs),
+        next_id: 0,
+    };
     match &args.command {
         GraphCommand::Stats => stats(&mut session),
         GraphCommand::Frontier { from } => frontier(&mut session, *from),
@@ -78,14 +84,22 @@ fn check_running(run_dir: &Path, run_id: &RunId) -> anyhow::Result<()> {
     }
     let pid_path = status.join(format!("{PROCESS}.pid"));
     let pid: i32 = std::fs::read_to_string(&pid_path)
-        .with_context(|| format!("run `{run_id}` has no graph-service: reading {}", pid_path.display()))?
+        .with_context(|| {
+            format!(
+                "run `{run_id}` has no graph-service: reading {}",
+                pid_path.display()
+            )
+        })?
         .trim()
         .parse()
         .with_context(|| format!("{} holds no pid", pid_path.display()))?;
     // SAFETY: signal 0 only checks that the process exists; nothing is delivered.
     let alive = unsafe { libc::kill(pid, 0) } == 0;
     if !alive {
-        bail!("run `{run_id}` in {} is not running: its graph-service (pid {pid}) is gone", run_dir.display());
+        bail!(
+            "run `{run_id}` in {} is not running: its graph-service (pid {pid}) is gone",
+            run_dir.display()
+        );
     }
     Ok(())
 }
@@ -96,14 +110,17 @@ impl Session {
         self.next_id += 1;
         let header = GraphRequestHeader::new(self.next_id, request.kind(), PhiVersion(0));
         let body = protocol::encode(request)?;
-        let (reply, bytes) = self.client.call(header, &body, self.timeout).with_context(|| {
-            format!(
-                "asking the graph-service of run `{}` ({}); it did not answer within {:?}",
-                self.run_id,
-                self.run_id.service_name(Service::Graph),
-                self.timeout
-            )
-        })?;
+        let (reply, bytes) = self
+            .client
+            .call(header, &body, self.timeout)
+            .with_context(|| {
+                format!(
+                    "asking the graph-service of run `{}` ({}); it did not answer within {:?}",
+                    self.run_id,
+                    self.run_id.service_name(Service::Graph),
+                    self.timeout
+                )
+            })?;
         let status = reply.status()?;
         let response: Option<GraphResponse> = if bytes.is_empty() {
             None
@@ -111,10 +128,14 @@ impl Session {
             Some(protocol::decode(&bytes).context("decoding the graph-service's answer")?)
         };
         match (status, response) {
-            (GraphStatus::Ok, Some(response)) => {
-                Ok(Reply { graph_version: reply.graph_version, phi_version: reply.phi_version, response })
+            (GraphStatus::Ok, Some(response)) => Ok(Reply {
+                graph_version: reply.graph_version,
+                phi_version: reply.phi_version,
+                response,
+            }),
+            (status, Some(GraphResponse::Error { message })) => {
+                bail!("graph-service answered {status:?}: {message}")
             }
-            (status, Some(GraphResponse::Error { message })) => bail!("graph-service answered {status:?}: {message}"),
             (status, other) => bail!("unexpected answer ({status:?}): {other:?}"),
         }
     }
@@ -128,7 +149,9 @@ fn print_versions(reply: &Reply) {
 fn stats(session: &mut Session) -> anyhow::Result<()> {
     let reply = session.ask(&GraphRequest::Stats)?;
     print_versions(&reply);
-    let GraphResponse::Stats(stats) = reply.response else { bail!("unexpected answer: {:?}", reply.response) };
+    let GraphResponse::Stats(stats) = reply.response else {
+        bail!("unexpected answer: {:?}", reply.response)
+    };
     println!("nodes: {}", stats.n_nodes);
     println!("edges: {}", stats.n_edges);
     println!("dropped_cells: {}", stats.n_dropped_cells);
@@ -137,12 +160,15 @@ fn stats(session: &mut Session) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Asks for a frontier from `from`; `None` (no frontier) comes with its reason.
-fn ask_frontier(session: &mut Session, from: LatentPoint) -> anyhow::Result<(Reply, Result<FrontierRoute, String>)> {
+/// Asks for a frontier from `from`; no frontier comes with its reason.
+fn ask_frontier(
+    session: &mut Session,
+    from: LatentPoint,
+) -> anyhow::Result<(Reply, Result<FrontierRoute, String>)> {
     let reply = session.ask(&GraphRequest::FrontierRoute { from })?;
     let answer = match &reply.response {
-        GraphResponse::FrontierRoute(Some(found)) => Ok(found.clone()),
-        GraphResponse::FrontierRoute(None) => Err(no_route_reason(&fetch_dump(session)?, from, None)),
+        GraphResponse::FrontierRoute(Ok(found)) => Ok(found.clone()),
+        GraphResponse::FrontierRoute(Err(reason)) => Err(describe(*reason)),
         other => bail!("unexpected answer: {other:?}"),
     };
     Ok((reply, answer))
@@ -166,17 +192,23 @@ fn frontier(session: &mut Session, from: LatentPoint) -> anyhow::Result<()> {
 }
 
 fn route(session: &mut Session, from: LatentPoint, to: LatentPoint) -> anyhow::Result<()> {
-    let query = RouteQuery { start: from, end: to, fallback_origin: None };
-    let reply = session.ask(&GraphRequest::Routes { queries: vec![query] })?;
+    let query = RouteQuery {
+        start: from,
+        end: to,
+        fallback_origin: None,
+    };
+    let reply = session.ask(&GraphRequest::Routes {
+        queries: vec![query],
+    })?;
     print_versions(&reply);
     match &reply.response {
         GraphResponse::Routes(answers) => match answers.first() {
             Some(RouteAnswer::Direct(nodes) | RouteAnswer::ViaFrontier(nodes)) => {
                 println!("route: {}", route_json(nodes));
             }
-            Some(RouteAnswer::NoRoute) => {
+            Some(RouteAnswer::NoRoute { direct, .. }) => {
                 println!("route: none");
-                println!("reason: {}", no_route_reason(&fetch_dump(session)?, from, Some(to)));
+                println!("reason: {}", describe(*direct));
             }
             None => bail!("the graph-service answered no route query"),
         },
@@ -196,20 +228,18 @@ fn explore(session: &mut Session, from: LatentPoint, episode: u64) -> anyhow::Re
     Ok(())
 }
 
-fn fetch_dump(session: &mut Session) -> anyhow::Result<GraphDump> {
-    match session.ask(&GraphRequest::Dump)?.response {
-        GraphResponse::Dump(dump) => Ok(dump),
-        other => bail!("unexpected answer: {other:?}"),
-    }
-}
-
 fn dump(session: &mut Session, png: &Path, from: Option<LatentPoint>) -> anyhow::Result<()> {
     let reply = session.ask(&GraphRequest::Dump)?;
-    let GraphResponse::Dump(graph) = &reply.response else { bail!("unexpected answer: {:?}", reply.response) };
+    let GraphResponse::Dump(graph) = &reply.response else {
+        bail!("unexpected answer: {:?}", reply.response)
+    };
     print_versions(&reply);
     println!("nodes: {}", graph.nodes.len());
     println!("edges: {}", graph.edges.len());
-    println!("max_visits: {}", graph.nodes.iter().map(|n| n.visits).max().unwrap_or(0));
+    println!(
+        "max_visits: {}",
+        graph.nodes.iter().map(|n| n.visits).max().unwrap_or(0)
+    );
     let origin = from.or_else(|| graph.nodes.first().map(|n| n.position));
     let found = match origin {
         Some(origin) => {
@@ -234,47 +264,9 @@ fn dump(session: &mut Session, png: &Path, from: Option<LatentPoint>) -> anyhow:
     Ok(())
 }
 
-/// Why there is no route from `from` (to `to`, or to any frontier when `None`).
-fn no_route_reason(dump: &GraphDump, from: LatentPoint, to: Option<LatentPoint>) -> String {
-    let Some(start) = node_at(dump, from) else {
-        return format!("start cell of {} is not a graph node ({} nodes)", point(from), dump.nodes.len());
-    };
-    let reached = reachable(dump, start);
-    match to {
-        None => format!("nothing is reachable from the start node {start} at {}", point(from)),
-        Some(to) => match node_at(dump, to) {
-            None => format!("end cell of {} is not a graph node", point(to)),
-            Some(end) if !reached[end] => format!("node {end} is not reachable from node {start}"),
-            Some(_) => "the graph-service found no route although the dump has one (graph rebuilt in between?)".to_owned(),
-        },
-    }
-}
-
-/// Index of the dump node whose cell holds `p` (keys by floor division, as the service).
-fn node_at(dump: &GraphDump, p: LatentPoint) -> Option<usize> {
-    let d = f64::from(dump.cell_size);
-    let key = [(f64::from(p[0]) / d).floor(), (f64::from(p[1]) / d).floor()];
-    dump.nodes.iter().position(|n| f64::from(n.key[0]) == key[0] && f64::from(n.key[1]) == key[1])
-}
-
-/// Which nodes are reachable from `start` over the dump's edges.
-fn reachable(dump: &GraphDump, start: usize) -> Vec<bool> {
-    let mut neighbours = vec![Vec::new(); dump.nodes.len()];
-    for &(a, b, _) in &dump.edges {
-        if let (Some(list_a), true) = (neighbours.get_mut(a as usize), (b as usize) < dump.nodes.len()) {
-            list_a.push(b as usize);
-            neighbours[b as usize].push(a as usize);
-        }
-    }
-    let mut seen = vec![false; dump.nodes.len()];
-    let mut stack = vec![start];
-    while let Some(node) = stack.pop() {
-        if std::mem::replace(&mut seen[node], true) {
-            continue;
-        }
-        stack.extend(neighbours[node].iter().copied().filter(|&n| !seen[n]));
-    }
-    seen
+/// A no-route reason as printed: the wire code, then its meaning.
+fn describe(reason: NoRouteReason) -> String {
+    format!("{reason:?} ({reason})")
 }
 
 /// `x,y`, the form `--from` takes.
@@ -291,10 +283,14 @@ fn route_json(route: &[LatentPoint]) -> String {
 pub fn parse_point(text: &str) -> Result<LatentPoint, String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let [x, y] = parts[..] else {
-        return Err(format!("expected X,Y (two numbers separated by a comma), got `{text}`"));
+        return Err(format!(
+            "expected X,Y (two numbers separated by a comma), got `{text}`"
+        ));
     };
     let parse = |s: &str| -> Result<f32, String> {
-        let v: f32 = s.parse().map_err(|e| format!("`{s}` in `{text}` is not a number: {e}"))?;
+        let v: f32 = s
+            .parse()
+            .map_err(|e| format!("`{s}` in `{text}` is not a number: {e}"))?;
         if v.is_finite() {
             Ok(v)
         } else {
@@ -306,8 +302,6 @@ pub fn parse_point(text: &str) -> Result<LatentPoint, String> {
 
 #[cfg(test)]
 mod tests {
-    use protocol::graph::DumpNode;
-
     use super::*;
 
     #[test]
@@ -319,17 +313,10 @@ mod tests {
         assert!(parse_point("inf,2").is_err());
     }
 
-    fn dump() -> GraphDump {
-        let node = |x: i32, y: i32| DumpNode { key: [x, y], position: [x as f32 * 2.0, y as f32 * 2.0], visits: 1 };
-        GraphDump { cell_size: 2.0, nodes: vec![node(0, 0), node(1, 0), node(-3, -3)], edges: vec![(0, 1, 1.0)] }
-    }
-
     #[test]
-    fn no_route_reasons_name_the_unknown_cell_or_the_unreachable_node() {
-        let d = dump();
-        assert!(no_route_reason(&d, [9.0, 9.0], None).contains("start cell"));
-        assert!(no_route_reason(&d, [0.5, 0.5], Some([99.0, 0.0])).contains("end cell"));
-        assert!(no_route_reason(&d, [0.5, 0.5], Some([-5.5, -5.5])).contains("not reachable"));
-        assert!(no_route_reason(&d, [-5.5, -5.5], None).contains("nothing is reachable"));
+    fn a_reason_prints_its_wire_code_and_its_meaning() {
+        let text = describe(NoRouteReason::EndUnknown);
+        assert!(text.starts_with("EndUnknown ("), "{text}");
+        assert!(text.contains("end point"), "{text}");
     }
 }

@@ -13,7 +13,7 @@
 
 use std::fmt;
 
-use protocol::graph::{RouteAnswer, RouteQuery};
+use protocol::graph::{NoRouteReason, RouteAnswer, RouteQuery};
 use protocol::LatentPoint;
 use rand::Rng;
 
@@ -23,6 +23,8 @@ use crate::graph::{LatentGraph, NodeId};
 /// Why there is no route or frontier.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum NoRoute {
+    /// The graph has no nodes (none built yet, or built from no stored state).
+    EmptyGraph,
     /// The start point's cell is not a graph node.
     UnknownStart {
         /// The start point.
@@ -50,6 +52,7 @@ pub enum NoRoute {
 impl fmt::Display for NoRoute {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
+            NoRoute::EmptyGraph => f.write_str("the graph has no nodes"),
             NoRoute::UnknownStart { point } => {
                 write!(f, "start point {point:?} is in no graph node's cell")
             }
@@ -69,6 +72,28 @@ impl fmt::Display for NoRoute {
     }
 }
 
+impl NoRoute {
+    /// The wire reason (without the points and node ids).
+    pub fn reason(&self) -> NoRouteReason {
+        match self {
+            NoRoute::EmptyGraph => NoRouteReason::EmptyGraph,
+            NoRoute::UnknownStart { .. } => NoRouteReason::StartUnknown,
+            NoRoute::UnknownEnd { .. } => NoRouteReason::EndUnknown,
+            NoRoute::Unreachable { .. } => NoRouteReason::Unreachable,
+            NoRoute::NothingReachable { .. } => NoRouteReason::NothingReachable,
+        }
+    }
+}
+
+/// The node whose cell holds `point`; [`NoRoute::EmptyGraph`] before any node exists, else
+/// [`NoRoute::UnknownStart`] if the cell is not a node.
+fn start_node(graph: &LatentGraph, point: LatentPoint) -> Result<NodeId, NoRoute> {
+    if graph.n_nodes() == 0 {
+        return Err(NoRoute::EmptyGraph);
+    }
+    graph.node_at(point).ok_or(NoRoute::UnknownStart { point })
+}
+
 /// A frontier node and the route to it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Frontier {
@@ -86,9 +111,7 @@ pub fn route(
     start: LatentPoint,
     end: LatentPoint,
 ) -> Result<Vec<NodeId>, NoRoute> {
-    let from = graph
-        .node_at(start)
-        .ok_or(NoRoute::UnknownStart { point: start })?;
+    let from = start_node(graph, start)?;
     let to = graph
         .node_at(end)
         .ok_or(NoRoute::UnknownEnd { point: end })?;
@@ -113,9 +136,7 @@ pub fn frontier<R: Rng>(
     fraction: f64,
     rng: &mut R,
 ) -> Result<Frontier, NoRoute> {
-    let start = graph
-        .node_at(from)
-        .ok_or(NoRoute::UnknownStart { point: from })?;
+    let start = start_node(graph, from)?;
     let paths = shortest_paths(graph.adjacency(), start);
     let max = paths.max_distance().unwrap_or(0);
     if max == 0 {
@@ -142,30 +163,35 @@ pub fn frontier<R: Rng>(
 }
 
 /// Answers one SI route query: the direct route, else (with a fallback origin) the route to a
-/// random frontier seen from it, else [`RouteAnswer::NoRoute`].
+/// random frontier seen from it, else [`RouteAnswer::NoRoute`] with both reasons.
 pub fn answer_route_query<R: Rng>(
     graph: &LatentGraph,
     query: &RouteQuery,
     fraction: f64,
     rng: &mut R,
 ) -> RouteAnswer {
-    if let Ok(nodes) = route(graph, query.start, query.end) {
-        return RouteAnswer::Direct(positions(graph, &nodes));
-    }
+    let direct = match route(graph, query.start, query.end) {
+        Ok(nodes) => return RouteAnswer::Direct(positions(graph, &nodes)),
+        Err(why) => why.reason(),
+    };
     let Some(origin) = query.fallback_origin else {
-        return RouteAnswer::NoRoute;
+        return RouteAnswer::NoRoute {
+            direct,
+            fallback: None,
+        };
     };
     // Route to the frontier node by id: its corner position, divided by d again, could
     // round into the neighbouring cell.
     let via_frontier = frontier(graph, origin, fraction, rng).and_then(|f| {
-        let start = graph
-            .node_at(query.start)
-            .ok_or(NoRoute::UnknownStart { point: query.start })?;
+        let start = start_node(graph, query.start)?;
         route_between(graph, start, f.node)
     });
     match via_frontier {
         Ok(nodes) => RouteAnswer::ViaFrontier(positions(graph, &nodes)),
-        Err(_) => RouteAnswer::NoRoute,
+        Err(why) => RouteAnswer::NoRoute {
+            direct,
+            fallback: Some(why.reason()),
+        },
     }
 }
 
@@ -322,7 +348,35 @@ mod tests {
         };
         assert_eq!(
             answer_route_query(&g, &hopeless, 0.9, &mut rng),
-            RouteAnswer::NoRoute
+            RouteAnswer::NoRoute {
+                direct: NoRouteReason::StartUnknown,
+                fallback: Some(NoRouteReason::StartUnknown)
+            }
+        );
+        let isolated_start = RouteQuery {
+            start: at(50, 50),
+            end: at(0, 0),
+            fallback_origin: Some(at(0, 0)),
+        };
+        assert_eq!(
+            answer_route_query(&g, &isolated_start, 0.9, &mut rng),
+            RouteAnswer::NoRoute {
+                direct: NoRouteReason::Unreachable,
+                fallback: Some(NoRouteReason::Unreachable)
+            },
+            "a frontier exists from the origin but not from the start's island"
+        );
+        let lonely_origin = RouteQuery {
+            start: at(1, 0),
+            end: at(9, 9),
+            fallback_origin: Some(at(50, 50)),
+        };
+        assert_eq!(
+            answer_route_query(&g, &lonely_origin, 0.9, &mut rng),
+            RouteAnswer::NoRoute {
+                direct: NoRouteReason::EndUnknown,
+                fallback: Some(NoRouteReason::NothingReachable)
+            }
         );
         let no_fallback = RouteQuery {
             fallback_origin: None,
@@ -330,7 +384,33 @@ mod tests {
         };
         assert_eq!(
             answer_route_query(&g, &no_fallback, 0.9, &mut rng),
-            RouteAnswer::NoRoute
+            RouteAnswer::NoRoute {
+                direct: NoRouteReason::Unreachable,
+                fallback: None
+            }
+        );
+    }
+
+    #[test]
+    fn an_empty_graph_is_its_own_reason() {
+        let g = build(&[]);
+        let mut rng = Pcg64::seed_from_u64(7);
+        assert_eq!(route(&g, at(0, 0), at(1, 1)), Err(NoRoute::EmptyGraph));
+        assert_eq!(
+            frontier(&g, at(0, 0), 0.9, &mut rng),
+            Err(NoRoute::EmptyGraph)
+        );
+        let query = RouteQuery {
+            start: at(0, 0),
+            end: at(1, 1),
+            fallback_origin: Some(at(0, 0)),
+        };
+        assert_eq!(
+            answer_route_query(&g, &query, 0.9, &mut rng),
+            RouteAnswer::NoRoute {
+                direct: NoRouteReason::EmptyGraph,
+                fallback: Some(NoRouteReason::EmptyGraph)
+            }
         );
     }
 }

@@ -11,12 +11,10 @@
 //! that answered, whatever the status):
 //! - `Stats`: always `Ok`, also before the first graph.
 //! - `FrontierRoute`, `Routes`, `Dump`: `NotReady` until a graph is built, with an `Error` body
-//!   giving the reason (empty graph: no φ weights yet). `FrontierRoute(None)` and
-//!   `RouteAnswer::NoRoute` have no room for a reason in the wire types; they are counted
-//!   (`frontier_not_found`, `routes_not_found`), and the reason (start cell unknown, end cell
-//!   unknown, unreachable, nothing reachable) is [`crate::NoRoute`] from
-//!   [`GraphService::frontier_route`] / [`GraphService::route`]; `asi graph` derives it from a
-//!   dump for its messages.
+//!   giving the reason (empty graph: no φ weights yet). `FrontierRoute(Err(reason))` and
+//!   `RouteAnswer::NoRoute { direct, fallback }` carry the [`NoRouteReason`] (empty graph,
+//!   start cell unknown, end cell unknown, unreachable, nothing reachable); they are counted
+//!   (`frontier_not_found`, `routes_not_found`).
 //! - `LeastVisited`: answered from the visit counts (which exist before the graph); an empty
 //!   candidate list is `InvalidRequest`.
 //! - `ExploreSubgoal`: HESS's count-based subgoal ([`crate::hess`]); `NotReady` with a reason
@@ -26,7 +24,7 @@
 
 use protocol::graph::{
     DumpNode, FrontierRoute, GraphDump, GraphRequestHeader, GraphResponseHeader,
-    GraphStats as WireStats, GraphStatus, ReachSample, RouteAnswer, RouteQuery,
+    GraphStats as WireStats, GraphStatus, NoRouteReason, ReachSample, RouteAnswer, RouteQuery,
 };
 use protocol::{GraphRequest, GraphResponse, LatentPoint, ProtocolError};
 
@@ -227,11 +225,14 @@ impl GraphService {
         let Some(graph) = self.graph.as_ref() else {
             return Answer::NotReady(NO_GRAPH_YET.to_owned());
         };
-        let found = frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng).ok();
-        self.stats.frontier_not_found += u64::from(found.is_none());
-        let answer = found.and_then(|f| {
-            Some(FrontierRoute {
-                frontier: graph.position(f.node)?,
+        let found = frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng);
+        self.stats.frontier_not_found += u64::from(found.is_err());
+        let answer = found.map_err(|why| why.reason()).and_then(|f| {
+            Ok(FrontierRoute {
+                // A frontier node is a node of this graph, so it has a position.
+                frontier: graph
+                    .position(f.node)
+                    .ok_or(NoRouteReason::NothingReachable)?,
                 route: positions(graph, &f.route),
                 distance: f.distance as f32,
             })
@@ -250,7 +251,7 @@ impl GraphService {
             .collect();
         self.stats.routes_not_found += answers
             .iter()
-            .filter(|a| **a == RouteAnswer::NoRoute)
+            .filter(|a| matches!(a, RouteAnswer::NoRoute { .. }))
             .count() as u64;
         Answer::Ok(GraphResponse::Routes(answers))
     }

@@ -294,21 +294,16 @@ impl GraphService {
     }
 
     /// A random frontier seen from `from` and the route to it ([`frontier::frontier`]).
-    /// Without a graph every start cell is unknown.
+    /// Without a graph the answer is [`NoRoute::EmptyGraph`].
     pub fn frontier_route(&mut self, from: LatentPoint) -> Result<Frontier, NoRoute> {
-        let graph = self
-            .graph
-            .as_ref()
-            .ok_or(NoRoute::UnknownStart { point: from })?;
+        let graph = self.graph.as_ref().ok_or(NoRoute::EmptyGraph)?;
         frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng)
     }
 
     /// The route between the cells of two points ([`frontier::route`]).
+    /// Without a graph the answer is [`NoRoute::EmptyGraph`].
     pub fn route(&self, start: LatentPoint, end: LatentPoint) -> Result<Vec<NodeId>, NoRoute> {
-        let graph = self
-            .graph
-            .as_ref()
-            .ok_or(NoRoute::UnknownStart { point: start })?;
+        let graph = self.graph.as_ref().ok_or(NoRoute::EmptyGraph)?;
         frontier::route(graph, start, end)
     }
 

@@ -4,7 +4,8 @@ mod common;
 
 use common::*;
 use protocol::graph::{
-    GraphRequestHeader, GraphRequestKind, GraphStatus, ReachSample, RouteAnswer, RouteQuery,
+    GraphRequestHeader, GraphRequestKind, GraphStatus, NoRouteReason, ReachSample, RouteAnswer,
+    RouteQuery,
 };
 use protocol::{GraphRequest, GraphResponse, PhiVersion};
 
@@ -203,7 +204,7 @@ fn malformed_bytes_wrong_versions_and_nan_points_get_errors_and_the_service_keep
         &GraphRequest::FrontierRoute { from: at(0, 0) },
     );
     assert_eq!(status(&response), GraphStatus::Ok);
-    assert!(matches!(body, Some(GraphResponse::FrontierRoute(Some(_)))));
+    assert!(matches!(body, Some(GraphResponse::FrontierRoute(Ok(_)))));
 }
 
 #[test]
@@ -240,7 +241,7 @@ fn frontier_route_goes_from_the_start_cell_to_a_far_node() {
             &GraphRequest::FrontierRoute { from: [1.2, 0.3] },
         );
         assert_eq!(status(&response), GraphStatus::Ok);
-        let Some(GraphResponse::FrontierRoute(Some(answer))) = body else {
+        let Some(GraphResponse::FrontierRoute(Ok(answer))) = body else {
             panic!("{body:?}")
         };
         // From (1, 0): the tips (−4, 0), (0, 4), (0, −4) are 5 hops away, (4, 0) is 3.
@@ -257,19 +258,24 @@ fn frontier_route_goes_from_the_start_cell_to_a_far_node() {
 }
 
 #[test]
-fn frontier_route_from_an_unknown_or_isolated_cell_is_none() {
+fn frontier_route_from_an_unknown_cell_says_the_start_is_unknown() {
     let mut service = plus_service();
     for from in [at(30, 30), at(-7, -7)] {
         let (response, body) = ask(&mut service, &GraphRequest::FrontierRoute { from });
         assert_eq!(status(&response), GraphStatus::Ok);
-        assert_eq!(body, Some(GraphResponse::FrontierRoute(None)));
+        assert_eq!(
+            body,
+            Some(GraphResponse::FrontierRoute(Err(
+                NoRouteReason::StartUnknown
+            )))
+        );
     }
     // The island's two cells: the other one is the frontier.
     let (_, body) = ask(
         &mut service,
         &GraphRequest::FrontierRoute { from: at(10, 10) },
     );
-    let Some(GraphResponse::FrontierRoute(Some(answer))) = body else {
+    let Some(GraphResponse::FrontierRoute(Ok(answer))) = body else {
         panic!("{body:?}")
     };
     assert_eq!(answer.frontier, [11.0, 10.0]);
@@ -327,8 +333,20 @@ fn routes_answer_each_query_in_order_with_the_si_fallback() {
     };
     assert_eq!(route[0], [2.0, 0.0]);
     assert!([[4.0, 0.0], [-4.0, 0.0], [0.0, 4.0], [0.0, -4.0]].contains(route.last().unwrap()));
-    assert_eq!(answers[2], RouteAnswer::NoRoute);
-    assert_eq!(answers[3], RouteAnswer::NoRoute);
+    assert_eq!(
+        answers[2],
+        RouteAnswer::NoRoute {
+            direct: NoRouteReason::Unreachable,
+            fallback: None
+        }
+    );
+    assert_eq!(
+        answers[3],
+        RouteAnswer::NoRoute {
+            direct: NoRouteReason::StartUnknown,
+            fallback: Some(NoRouteReason::StartUnknown)
+        }
+    );
     assert_eq!(answers[4], RouteAnswer::Direct(vec![[3.0, 0.0]]));
 }
 

@@ -91,7 +91,8 @@ impl TryFrom<u32> for GraphRequestKind {
 pub enum GraphStatus {
     /// Answered; the body is the matching [`GraphResponse`].
     Ok = 0,
-    /// No graph has been built yet (before the first φ round); the body is empty.
+    /// The request cannot be answered yet (no graph before the first φ weights, or no stored
+    /// state for an explore subgoal); the body is a [`GraphResponse::Error`] with the reason.
     NotReady = 1,
     /// The request was malformed or had non-finite points; the body is [`GraphResponse::Error`].
     InvalidRequest = 2,
@@ -339,6 +340,41 @@ fn check_points<'a>(
     Ok(())
 }
 
+/// Why the graph-service found no route or no frontier.
+///
+/// In a [`RouteAnswer::NoRoute`], `direct` is the reason for the start→end search and
+/// `fallback` the reason for the fallback (frontier seen from the fallback origin, then the
+/// route start→frontier): there `StartUnknown` means the origin's or the start's cell is not a
+/// node, `NothingReachable` that no frontier exists from the origin, and `Unreachable` that the
+/// chosen frontier is not reachable from the start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum NoRouteReason {
+    /// The graph has no nodes.
+    EmptyGraph,
+    /// The start point's cell (or the origin's, for a frontier) is not a graph node.
+    StartUnknown,
+    /// The end point's cell is not a graph node.
+    EndUnknown,
+    /// Both cells are nodes, but the end is not reachable from the start.
+    Unreachable,
+    /// No node other than the start node is reachable, so there is no frontier.
+    NothingReachable,
+}
+
+impl std::fmt::Display for NoRouteReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            NoRouteReason::EmptyGraph => "the graph has no nodes",
+            NoRouteReason::StartUnknown => "the start point is in no graph node's cell",
+            NoRouteReason::EndUnknown => "the end point is in no graph node's cell",
+            NoRouteReason::Unreachable => "the end node is not reachable from the start node",
+            NoRouteReason::NothingReachable => {
+                "no node other than the start node is reachable (no frontier)"
+            }
+        })
+    }
+}
+
 /// A route answer of a batch.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum RouteAnswer {
@@ -346,8 +382,13 @@ pub enum RouteAnswer {
     Direct(Vec<LatentPoint>),
     /// No route to the end; route to a random frontier node seen from the fallback origin.
     ViaFrontier(Vec<LatentPoint>),
-    /// No route at all (a cell is unknown, or nothing is reachable).
-    NoRoute,
+    /// No route at all, with the reasons (see [`NoRouteReason`]).
+    NoRoute {
+        /// Why the direct route start→end failed.
+        direct: NoRouteReason,
+        /// Why the fallback failed; `None` when the query had no fallback origin.
+        fallback: Option<NoRouteReason>,
+    },
 }
 
 /// Frontier and route for an FR episode.
@@ -401,9 +442,10 @@ pub struct GraphDump {
 /// A response from the graph-service.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum GraphResponse {
-    /// Answer to [`GraphRequest::FrontierRoute`]; `None` when the start cell is unknown or no
-    /// other node is reachable (the actor falls back to a normal episode and counts it).
-    FrontierRoute(Option<FrontierRoute>),
+    /// Answer to [`GraphRequest::FrontierRoute`]; `Err` with the reason when the start cell is
+    /// unknown or no other node is reachable (the actor falls back to a normal episode and
+    /// counts it).
+    FrontierRoute(Result<FrontierRoute, NoRouteReason>),
     /// Answers to [`GraphRequest::Routes`], in query order.
     Routes(Vec<RouteAnswer>),
     /// Answer to [`GraphRequest::ExploreSubgoal`]: the absolute subgoal (pushed if applicable)

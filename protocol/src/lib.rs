@@ -34,7 +34,7 @@ pub use step::{DecisionKind, StepLayout, StepRecord, StepView};
 
 /// Version of the wire format. Bump it whenever a payload type, header, step record layout or
 /// postcard message changes shape or meaning; processes of different versions refuse each other.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// FNV-1a 64-bit offset basis.
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;

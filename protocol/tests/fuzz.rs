@@ -7,7 +7,8 @@
 
 use proptest::prelude::*;
 use protocol::graph::{
-    GraphRequestHeader, GraphRequestKind, GraphResponseHeader, GraphStatus, ReachSample, RouteQuery,
+    FrontierRoute, GraphRequestHeader, GraphRequestKind, GraphResponseHeader, GraphStatus,
+    NoRouteReason, ReachSample, RouteAnswer, RouteQuery,
 };
 use protocol::*;
 
@@ -54,6 +55,30 @@ fn seed_requests() -> Vec<GraphRequest> {
     ]
 }
 
+/// Valid responses carrying routes and no-route reasons, to mutate.
+fn seed_responses() -> Vec<GraphResponse> {
+    vec![
+        GraphResponse::FrontierRoute(Ok(FrontierRoute {
+            frontier: [4.0, 2.0],
+            route: vec![[0.0, 0.0], [2.0, 2.0], [4.0, 2.0]],
+            distance: 31.0,
+        })),
+        GraphResponse::FrontierRoute(Err(NoRouteReason::NothingReachable)),
+        GraphResponse::Routes(vec![
+            RouteAnswer::Direct(vec![[0.0, 0.0], [1.0, 1.0]]),
+            RouteAnswer::ViaFrontier(vec![[0.0, 0.0]]),
+            RouteAnswer::NoRoute {
+                direct: NoRouteReason::Unreachable,
+                fallback: Some(NoRouteReason::StartUnknown),
+            },
+            RouteAnswer::NoRoute {
+                direct: NoRouteReason::EmptyGraph,
+                fallback: None,
+            },
+        ]),
+    ]
+}
+
 /// A decoded request must survive a round trip, and its finiteness check must not panic.
 fn check_decoded_request(request: &GraphRequest) {
     let _ = request.check_finite();
@@ -70,6 +95,27 @@ proptest! {
     fn arbitrary_bytes_never_panic_the_graph_decoders(bytes in prop::collection::vec(any::<u8>(), 0..256)) {
         if let Ok(request) = decode::<GraphRequest>(&bytes) {
             check_decoded_request(&request);
+        }
+        if let Ok(response) = decode::<GraphResponse>(&bytes) {
+            let again = encode(&response).expect("a decoded response encodes");
+            prop_assert_eq!(encode(&decode::<GraphResponse>(&again).unwrap()).unwrap(), again);
+        }
+    }
+
+    #[test]
+    fn mutated_route_responses_decode_or_fail_cleanly(
+        which in 0usize..3,
+        flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+        cut in any::<prop::sample::Index>(),
+        truncate in any::<bool>(),
+    ) {
+        let mut bytes = encode(&seed_responses()[which]).unwrap();
+        for (at, value) in flips {
+            let i = at.index(bytes.len());
+            bytes[i] = value;
+        }
+        if truncate {
+            bytes.truncate(cut.index(bytes.len() + 1));
         }
         if let Ok(response) = decode::<GraphResponse>(&bytes) {
             let again = encode(&response).expect("a decoded response encodes");

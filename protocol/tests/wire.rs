@@ -4,7 +4,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use proptest::prelude::*;
 use protocol::graph::{
     FrontierRoute, GraphRequestHeader, GraphRequestKind, GraphResponseHeader, GraphStatus,
-    RouteAnswer, RouteQuery,
+    NoRouteReason, RouteAnswer, RouteQuery,
 };
 use protocol::payload::METRIC_NAME_CAPACITY;
 use protocol::*;
@@ -92,7 +92,10 @@ fn payload_types_have_explicit_names_and_no_implicit_padding() {
     );
     assert_eq!(std::mem::size_of::<TrajectoryHeader>(), 4 * 8 + 10 * 4);
     assert_eq!(std::mem::size_of::<RunSchedule>(), 8 + 2 * 4);
-    assert_eq!(std::mem::size_of::<WeightsHeader>(), 4 * 8 + 2 * 4 + (8 + 2 * 4));
+    assert_eq!(
+        std::mem::size_of::<WeightsHeader>(),
+        4 * 8 + 2 * 4 + (8 + 2 * 4)
+    );
     assert_eq!(std::mem::size_of::<GraphRequestHeader>(), 2 * 8 + 2 * 4);
     assert_eq!(std::mem::size_of::<GraphResponseHeader>(), 3 * 8 + 4 * 4);
     assert_eq!(
@@ -254,7 +257,7 @@ fn graph_messages_round_trip_through_postcard() {
     assert_eq!(decode::<GraphRequest>(&bytes), Ok(request.clone()));
     assert_eq!(request.kind(), GraphRequestKind::Routes);
 
-    let response = GraphResponse::FrontierRoute(Some(FrontierRoute {
+    let response = GraphResponse::FrontierRoute(Ok(FrontierRoute {
         frontier: [10.0, 12.0],
         route: vec![[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]],
         distance: 2.0,
@@ -265,12 +268,65 @@ fn graph_messages_round_trip_through_postcard() {
     );
     let routes = GraphResponse::Routes(vec![
         RouteAnswer::Direct(vec![[0.0, 0.0]]),
-        RouteAnswer::NoRoute,
+        RouteAnswer::NoRoute {
+            direct: NoRouteReason::Unreachable,
+            fallback: Some(NoRouteReason::NothingReachable),
+        },
+        RouteAnswer::NoRoute {
+            direct: NoRouteReason::EndUnknown,
+            fallback: None,
+        },
     ]);
     assert_eq!(
         decode::<GraphResponse>(&encode(&routes).expect("encodes")),
         Ok(routes)
     );
+}
+
+const ALL_NO_ROUTE_REASONS: [NoRouteReason; 5] = [
+    NoRouteReason::EmptyGraph,
+    NoRouteReason::StartUnknown,
+    NoRouteReason::EndUnknown,
+    NoRouteReason::Unreachable,
+    NoRouteReason::NothingReachable,
+];
+
+#[test]
+fn every_no_route_reason_survives_the_wire_in_both_answers() {
+    for reason in ALL_NO_ROUTE_REASONS {
+        let frontier = GraphResponse::FrontierRoute(Err(reason));
+        assert_eq!(
+            decode::<GraphResponse>(&encode(&frontier).expect("encodes")),
+            Ok(frontier)
+        );
+        let route = GraphResponse::Routes(vec![RouteAnswer::NoRoute {
+            direct: reason,
+            fallback: Some(reason),
+        }]);
+        assert_eq!(
+            decode::<GraphResponse>(&encode(&route).expect("encodes")),
+            Ok(route)
+        );
+    }
+}
+
+#[test]
+fn no_route_reasons_have_distinct_messages() {
+    let texts: std::collections::HashSet<String> =
+        ALL_NO_ROUTE_REASONS.iter().map(|r| r.to_string()).collect();
+    assert_eq!(texts.len(), ALL_NO_ROUTE_REASONS.len());
+}
+
+#[test]
+fn an_unknown_no_route_reason_code_is_a_decode_error() {
+    let mut bytes = encode(&NoRouteReason::NothingReachable).expect("encodes");
+    assert_eq!(
+        bytes,
+        [4],
+        "postcard writes the variant index as one varint byte"
+    );
+    bytes[0] = 5;
+    assert!(decode::<NoRouteReason>(&bytes).is_err());
 }
 
 #[test]
