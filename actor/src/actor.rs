@@ -11,8 +11,14 @@
 //! - Determinism: for a given config, actor id, seed and sequence of calls (including which
 //!   weights are loaded between which chunks, and the oracle's answers), the chunks are
 //!   bit-identical.
-//! - An episode's exploration gate (`count_prob`, run-wide episode count) is the schedule of
-//!   the last weights loaded before it started; it does not change mid-episode.
+//! - An episode's exploration gate (`count_prob`, run-wide episode count) and its FR draw
+//!   (`fr_prob`) use the schedule of the last weights loaded before it started; they do not
+//!   change mid-episode.
+//! - Frontier-reaching episodes ([`crate::frontier`]): drawn at episode start, after the reset
+//!   and φ(s_0); an FR episode on a maze task has its env goal forced to a far goal (the
+//!   generalisation of the reference's U-maze `g_x ≤ 2, g_y ≥ 8` re-reset, digest §2.2, §9.3),
+//!   re-drawn with [`envs::maze::Maze::sample_goal`] from the actor's generator. A new φ
+//!   version arriving mid-episode ends FR mode (counted).
 //! - `FAR_GOAL` is set on every chunk of an episode whose goal is a far goal
 //!   (`Maze::is_far_goal_with_fraction` with `exploration.far_goal_fraction`; tasks without a
 //!   maze have no far goals, as the code's `g_y ≥ 8` rule never holds for the cheetah).
@@ -36,6 +42,7 @@ use crate::chunk::{header_for, Chunk, ChunkBuffer};
 use crate::episode::{DecisionCounters, Episode, Rollout, RolloutParams, StepOutcome};
 use crate::error::{ActorError, WeightsRejection};
 use crate::exploration::DeterministicNoise;
+use crate::frontier::{assign, Assignment, FrontierEpisode, FrontierParams, FrontierStats};
 use crate::networks::ActorNets;
 use crate::oracle::GraphOracle;
 use crate::record::RecordWriter;
@@ -49,6 +56,11 @@ pub const MAX_EMPTY_EPISODES: u32 = 100;
 /// Reaching samples are reported at episode end, or as soon as this many are pending.
 /// Source: ours (an episode has at most T/c of them: 25 on U, 50 elsewhere).
 pub const REACH_REPORT_BATCH: usize = 64;
+
+/// Goal draws an FR episode makes to find a far goal before it keeps the env's own goal.
+/// Source: ours (far goals cover about a fifth of the U-maze's goal box, so 1000 draws all
+/// missing has probability below 1e-90).
+pub const MAX_FAR_GOAL_DRAWS: u32 = 1000;
 
 /// Counters of one actor, for metrics.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,6 +112,8 @@ pub struct ActorStats {
     pub last_episode_explore_reach_error: Option<f32>,
     /// Whether the last finished episode had a far goal.
     pub last_episode_far_goal: bool,
+    /// Frontier-reaching counters (SPEC §6.6).
+    pub frontier: FrontierStats,
 }
 
 /// One actor: an environment, the actor-side networks, and the episode in progress.
@@ -179,6 +193,7 @@ impl Actor {
             record: vec![0.0; layout.record_len()],
             phi_version: PhiVersion(0),
             decisions: DecisionCounters::default(),
+            frontier_stats: FrontierStats::default(),
         };
         Ok(Actor {
             rollout,
@@ -217,6 +232,7 @@ impl Actor {
                 last_episode_reach_error: None,
                 last_episode_explore_reach_error: None,
                 last_episode_far_goal: false,
+                frontier: FrontierStats::default(),
             },
         })
     }
@@ -273,7 +289,7 @@ impl Actor {
                     });
                 }
                 n_empty_episodes += 1;
-                self.start_episode()?;
+                self.start_episode(oracle)?;
             }
             self.step(oracle)?;
         }
@@ -316,18 +332,22 @@ impl Actor {
         })
     }
 
-    fn start_episode(&mut self) -> Result<(), ActorError> {
+    fn start_episode(&mut self, oracle: &mut dyn GraphOracle) -> Result<(), ActorError> {
         let index = self.n_episodes_started;
         let id = episode_id(self.actor_id, index).ok_or(ActorError::EpisodeIdsExhausted {
             actor_id: self.actor_id.0,
             n_episodes: index,
         })?;
         self.n_episodes_started += 1;
-        let reset = self
+        let mut reset = self
             .rollout
             .env
             .reset(env_seed(self.seed, self.actor_id, index));
         let phi = self.rollout.nets.phi_rows(&reset.obs, 1)?;
+        let frontier = self.assign_frontier(&phi, oracle)?;
+        if frontier.is_some() {
+            self.force_far_goal(&mut reset)?;
+        }
         let plan = SubgoalPlan {
             base: SubgoalSource::for_training_episode(index, self.random_episodes),
             explore: ExploreGate::for_schedule(&self.stats.schedule, self.explore_start_episode),
@@ -336,7 +356,65 @@ impl Actor {
             self.rollout.env.maze().is_some_and(|maze| {
                 maze.is_far_goal_with_fraction(reset.goal, self.far_goal_fraction)
             });
-        self.episode = Some(Episode::new(id, plan, far_goal, reset, phi));
+        self.episode = Some(Episode::new(id, plan, far_goal, reset, phi, frontier));
+        Ok(())
+    }
+
+    /// The FR draw of a new episode (counted), with φ(s_0) = `phi`.
+    fn assign_frontier(
+        &mut self,
+        phi: &[f32],
+        oracle: &mut dyn GraphOracle,
+    ) -> Result<Option<FrontierEpisode>, ActorError> {
+        let rollout = &mut self.rollout;
+        let assignment = assign(
+            rollout.params.frontier.as_ref(),
+            self.stats.schedule.fr_prob,
+            phi,
+            rollout.phi_version,
+            &mut rollout.rng,
+            oracle,
+        )?;
+        let stats = &mut rollout.frontier_stats;
+        Ok(match assignment {
+            Assignment::Normal => None,
+            Assignment::NoRoute => {
+                stats.n_no_route += 1;
+                None
+            }
+            Assignment::Frontier(fr) => {
+                stats.n_episodes += 1;
+                Some(fr)
+            }
+        })
+    }
+
+    /// Re-draws the goal of an FR episode until it is a far goal and sets it in the env
+    /// (digest §2.2). Tasks without a maze keep their goal (the reference hack has no cheetah
+    /// branch); so does an episode whose goal is already far, or that finds none in
+    /// [`MAX_FAR_GOAL_DRAWS`] draws.
+    fn force_far_goal(&mut self, reset: &mut envs::api::Reset) -> Result<(), ActorError> {
+        let fraction = self.far_goal_fraction;
+        let rollout = &mut self.rollout;
+        let Some(maze) = rollout.env.maze() else {
+            return Ok(());
+        };
+        if maze.is_far_goal_with_fraction(reset.goal, fraction) {
+            return Ok(());
+        }
+        let far = (0..MAX_FAR_GOAL_DRAWS)
+            .map(|_| maze.sample_goal(&mut rollout.rng))
+            .find(|goal| maze.is_far_goal_with_fraction(*goal, fraction));
+        let Some(goal) = far else {
+            tracing::warn!(
+                actor = self.actor_id.0,
+                "no far goal found for an FR episode"
+            );
+            return Ok(());
+        };
+        rollout.env.set_goal(goal)?;
+        reset.goal = goal;
+        rollout.frontier_stats.n_goals_forced += 1;
         Ok(())
     }
 
@@ -432,11 +510,15 @@ impl Actor {
                 reason,
             });
         }
+        let new_phi = header.phi_version != self.stats.phi_version;
         self.stats.policy_version = header.policy_version;
         self.stats.phi_version = header.phi_version;
         self.stats.schedule = header.schedule;
         self.rollout.phi_version = header.phi_version;
         if let Some(episode) = self.episode.as_mut() {
+            if new_phi && episode.end_frontier_for_new_phi() {
+                self.rollout.frontier_stats.n_ended_by_new_phi += 1;
+            }
             episode.relabel_phi(
                 &mut self.rollout.nets,
                 &self.rollout.writer,
@@ -469,6 +551,7 @@ impl Actor {
             n_decisions: decisions.n_decisions,
             n_explore_decisions: decisions.n_explore,
             n_explore_fallbacks: decisions.n_explore_fallbacks,
+            frontier: self.rollout.frontier_stats,
             ..self.stats
         }
     }
@@ -527,5 +610,6 @@ fn rollout_params(config: &Config, spec: &EnvSpec) -> Result<RolloutParams, Acto
         },
         action_low: spec.action_low.clone(),
         action_high: spec.action_high.clone(),
+        frontier: FrontierParams::from_config(config)?,
     })
 }

@@ -14,6 +14,10 @@
 //!   ‖subgoal − φ(s_{t+c})‖ at its end. Every such segment enters the episode's reaching
 //!   statistics; an explore segment followed by another decision (not the episode's last) also
 //!   yields a [`ReachSample`] at its un-pushed candidate, for the graph-service's potential map.
+//!   FR segments (waypoint or count mode) report the same way, at their subgoal (no push).
+//! - Frontier-reaching episodes ([`crate::frontier`]): while FR mode lasts, every decision comes
+//!   from the episode's [`FrontierEpisode`] instead of the plan; the low level acts without
+//!   noise in navigation segments and with its usual noise otherwise.
 
 use envs::api::{Env, Reset, Step};
 use protocol::graph::ReachSample;
@@ -21,7 +25,8 @@ use protocol::{DecisionKind, EpisodeId, LatentPoint, PhiVersion, TrajectoryFlags
 use rand_pcg::Pcg64Mcg;
 
 use crate::error::ActorError;
-use crate::exploration::{clip, low_action, DeterministicNoise};
+use crate::exploration::{clip, low_action, noise_free_low_action, DeterministicNoise};
+use crate::frontier::{FrChoice, FrontierEpisode, FrontierParams, FrontierStats, Switch};
 use crate::networks::ActorNets;
 use crate::oracle::GraphOracle;
 use crate::record::{RecordWriter, StepFields};
@@ -39,6 +44,8 @@ pub(crate) struct RolloutParams {
     /// Env action bounds.
     pub action_low: Vec<f32>,
     pub action_high: Vec<f32>,
+    /// Frontier-reaching parameters; `None` when `asi.frontier_reaching` is off.
+    pub frontier: Option<FrontierParams>,
 }
 
 /// Everything a step uses besides the episode's own state.
@@ -58,6 +65,8 @@ pub(crate) struct Rollout {
     pub phi_version: PhiVersion,
     /// Decision counters over all episodes.
     pub decisions: DecisionCounters,
+    /// Frontier-reaching counters over all episodes.
+    pub frontier_stats: FrontierStats,
 }
 
 /// Decision counters of an actor, over all its episodes.
@@ -126,6 +135,10 @@ pub(crate) struct Episode {
     pub reach_explore: ReachTally,
     /// Reaching samples not yet reported to the graph-service.
     pub reach_samples: Vec<ReachSample>,
+    /// FR state, for frontier-reaching episodes.
+    pub frontier: Option<FrontierEpisode>,
+    /// The segment in progress is FR navigation: the low level acts without noise.
+    low_noise_free: bool,
     /// Source of the segment in progress (`None` before the first decision).
     segment_source: Option<SubgoalSource>,
     /// Un-pushed candidate of the explore segment in progress.
@@ -139,13 +152,14 @@ pub(crate) struct Episode {
 }
 
 impl Episode {
-    /// An episode starting from `reset`, with φ(s_0) = `phi`.
+    /// An episode starting from `reset`, with φ(s_0) = `phi`; `frontier` for an FR episode.
     pub fn new(
         id: EpisodeId,
         plan: SubgoalPlan,
         far_goal: bool,
         reset: Reset,
         phi: Vec<f32>,
+        frontier: Option<FrontierEpisode>,
     ) -> Self {
         let latent = phi.len();
         Self {
@@ -160,6 +174,8 @@ impl Episode {
             reach_all: ReachTally::default(),
             reach_explore: ReachTally::default(),
             reach_samples: Vec::new(),
+            frontier,
+            low_noise_free: false,
             segment_source: None,
             candidate: None,
             decision_obs: reset.obs.clone(),
@@ -231,6 +247,8 @@ impl Episode {
         self.reach_all.add(error);
         if source == SubgoalSource::Explore {
             self.reach_explore.add(error);
+        }
+        if source.is_graph_chosen() {
             if let (true, Some(subgoal)) = (followed, self.candidate) {
                 self.reach_samples.push(ReachSample { subgoal, error });
             }
@@ -248,6 +266,9 @@ impl Episode {
             return Ok(DecisionKind::None);
         }
         self.close_segment(true);
+        if let Some(kind) = self.decide_frontier(rollout, oracle)? {
+            return Ok(kind);
+        }
         let inputs = DecisionInputs {
             obs: &self.obs,
             phi: &self.phi,
@@ -266,6 +287,7 @@ impl Episode {
         self.decision_obs.copy_from_slice(&self.obs);
         self.segment_source = Some(decided.source);
         self.candidate = decided.candidate;
+        self.low_noise_free = false;
         let counters = &mut rollout.decisions;
         counters.n_decisions += 1;
         counters.n_explore += u64::from(decided.source == SubgoalSource::Explore);
@@ -273,16 +295,78 @@ impl Episode {
         Ok(decided.source.decision_kind())
     }
 
-    /// The low level's exploratory action on `[obs, φ(obs), subgoal]`, clipped to the env
-    /// bounds, into `rollout.action`.
+    /// An FR decision while the episode's FR mode lasts (`None` otherwise): subgoal, stored
+    /// delta = subgoal − φ(s_t) (unclipped), counters.
+    fn decide_frontier(
+        &mut self,
+        rollout: &mut Rollout,
+        oracle: &mut dyn GraphOracle,
+    ) -> Result<Option<DecisionKind>, ActorError> {
+        let (Some(fr), Some(params)) = (self.frontier.as_mut(), rollout.params.frontier) else {
+            return Ok(None);
+        };
+        let Ok(at) = LatentPoint::try_from(&self.phi[..]) else {
+            return Ok(None);
+        };
+        if !fr.is_active() {
+            return Ok(None);
+        }
+        let decided = fr.decide(at, &params, rollout.phi_version, &mut rollout.rng, oracle)?;
+        self.subgoal.copy_from_slice(&decided.subgoal);
+        for ((d, sg), phi) in self.delta.iter_mut().zip(&decided.subgoal).zip(&self.phi) {
+            *d = sg - phi;
+        }
+        self.decision_obs.copy_from_slice(&self.obs);
+        self.low_noise_free = decided.deterministic_low();
+        let source = match decided.choice {
+            FrChoice::Waypoint { .. } => SubgoalSource::FrontierRoute,
+            FrChoice::Count { .. } => SubgoalSource::FrontierCount,
+        };
+        self.segment_source = Some(source);
+        self.candidate = Some(decided.subgoal);
+        rollout.decisions.n_decisions += 1;
+        let stats = &mut rollout.frontier_stats;
+        match decided.choice {
+            FrChoice::Waypoint { .. } => stats.n_waypoint_decisions += 1,
+            FrChoice::Count { fallback } => {
+                stats.n_count_decisions += 1;
+                stats.n_count_fallbacks += u64::from(fallback);
+            }
+        }
+        match decided.switch {
+            Some(Switch::NearFrontier) => stats.n_near_frontier_switches += 1,
+            Some(Switch::Stuck) => stats.n_stuck_switches += 1,
+            None => {}
+        }
+        Ok(Some(decided.decision_kind()))
+    }
+
+    /// Ends the episode's FR mode because a new φ arrived (its route and frontier are points of
+    /// the old φ-space); `true` if FR mode was on.
+    pub fn end_frontier_for_new_phi(&mut self) -> bool {
+        match self.frontier.as_mut() {
+            Some(fr) if fr.is_active() => {
+                fr.end();
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// The low level's action on `[obs, φ(obs), subgoal]` — noise-free in FR navigation
+    /// segments, exploratory otherwise — clipped to the env bounds, into `rollout.action`.
     fn choose_action(&self, rollout: &mut Rollout) -> Result<(), ActorError> {
         let head = rollout.nets.low_head(&self.obs, &self.phi, &self.subgoal)?;
-        low_action(
-            &head,
-            rollout.params.noise,
-            &mut rollout.rng,
-            &mut rollout.action,
-        );
+        if self.low_noise_free {
+            noise_free_low_action(&head, &mut rollout.action);
+        } else {
+            low_action(
+                &head,
+                rollout.params.noise,
+                &mut rollout.rng,
+                &mut rollout.action,
+            );
+        }
         let params = &rollout.params;
         clip(&mut rollout.action, &params.action_low, &params.action_high);
         Ok(())

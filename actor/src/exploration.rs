@@ -1,5 +1,6 @@
 //! Turning policy heads into actions: tanh-Gaussian sampling, the reference deterministic
-//! level's Gaussian + ε-random noise, uniform random high actions, and clipping.
+//! level's Gaussian + ε-random noise, the noise-free low action of FR navigation, uniform random
+//! high actions, and clipping.
 //!
 //! Invariants: every random number comes from the caller's generator (the actor's seeded
 //! `Pcg64Mcg`), drawn in a fixed order, so a seed fixes the actions; outputs are written into
@@ -70,6 +71,23 @@ pub(crate) fn low_action(
     }
 }
 
+/// The low level's noise-free action for `head` (FR navigation, SPEC §6.6): the deterministic
+/// actor's action, or `scale · tanh(μ)` for a SAC head.
+pub(crate) fn noise_free_low_action(head: &LowHead, out: &mut [f32]) {
+    match head {
+        LowHead::Gaussian(head) => {
+            for (a, mean) in out.iter_mut().zip(&head.mean) {
+                *a = head.scale * mean.tanh();
+            }
+        }
+        LowHead::Deterministic { action, .. } => {
+            for (a, mean) in out.iter_mut().zip(action) {
+                *a = *mean;
+            }
+        }
+    }
+}
+
 /// Clips `action` into the env's per-dimension bounds.
 pub(crate) fn clip(action: &mut [f32], low: &[f32], high: &[f32]) {
     for ((a, lo), hi) in action.iter_mut().zip(low).zip(high) {
@@ -101,6 +119,24 @@ mod tests {
             far > 5,
             "uniform replacement should sometimes move a zero mean far: {far}"
         );
+    }
+
+    #[test]
+    fn the_noise_free_low_action_is_the_mean_action_and_draws_nothing() {
+        let gaussian = LowHead::Gaussian(GaussianHead {
+            mean: vec![0.5, -2.0],
+            log_std: vec![3.0, 3.0],
+            scale: 2.0,
+        });
+        let mut out = [0.0; 2];
+        noise_free_low_action(&gaussian, &mut out);
+        assert_eq!(out, [2.0 * 0.5f32.tanh(), 2.0 * (-2.0f32).tanh()]);
+        let deterministic = LowHead::Deterministic {
+            action: vec![0.25, -0.75],
+            scale: 1.0,
+        };
+        noise_free_low_action(&deterministic, &mut out);
+        assert_eq!(out, [0.25, -0.75]);
     }
 
     #[test]

@@ -8,6 +8,8 @@
 //!   φ labels, records.
 //! - [`subgoal`]: [`SubgoalSource`], how the high level decides (random warm-up, policy, HESS
 //!   exploration through the graph-service).
+//! - [`frontier`]: frontier-reaching episodes (SPEC §6.6): the FR draw, route waypoints, the
+//!   ε and stuck switches, count mode; [`FrontierStats`].
 //! - [`oracle`]: [`GraphOracle`], the graph-service questions of an acting actor, with
 //!   [`NoGraph`] and [`ServiceOracle`] (the protocol over any [`GraphTransport`]).
 //! - [`eval`]: [`eval::Evaluator`], deterministic evaluation episodes on the test goal.
@@ -26,6 +28,7 @@ mod episode;
 pub mod error;
 pub mod eval;
 mod exploration;
+pub mod frontier;
 mod networks;
 pub mod oracle;
 mod record;
@@ -35,5 +38,8 @@ pub mod subgoal;
 pub use actor::{Actor, ActorStats};
 pub use chunk::Chunk;
 pub use error::{ActorError, WeightsRejection};
-pub use oracle::{ExploreAnswer, GraphOracle, GraphTransport, NoGraph, ServiceOracle};
+pub use frontier::{FrontierParams, FrontierStats};
+pub use oracle::{
+    ExploreAnswer, GraphOracle, GraphTransport, LeastVisitedAnswer, NoGraph, ServiceOracle,
+};
 pub use subgoal::{ExploreGate, SubgoalSource};

@@ -7,11 +7,17 @@
 //!   in-process graph-service's request handler (serial mode), so both modes share the encoding,
 //!   the status handling and the checks of the answer.
 //!
+//! Questions: HESS explore subgoals and reaching reports (SPEC §6.4), and for frontier-reaching
+//! episodes (SPEC §6.6) the frontier route at episode start and the least-visited count-mode
+//! candidate.
+//!
 //! Invariant: an oracle that cannot answer (no graph yet, timeout, refused or malformed reply)
 //! says so with `Ok(None)` / `Ok(false)`; the actor then falls back to its policy and counts it.
 //! `Err` is kept for failures that must abandon the episode.
 
-use protocol::graph::{GraphRequestHeader, GraphResponseHeader, GraphStatus, ReachSample};
+use protocol::graph::{
+    FrontierRoute, GraphRequestHeader, GraphResponseHeader, GraphStatus, ReachSample,
+};
 use protocol::{GraphRequest, GraphResponse, LatentPoint, PhiVersion};
 
 use crate::error::ActorError;
@@ -26,7 +32,18 @@ pub struct ExploreAnswer {
     pub candidate: LatentPoint,
 }
 
-/// The graph queries of an acting actor.
+/// The graph-service's pick among count-mode candidates (SPEC §6.6, paper Eq. 10).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LeastVisitedAnswer {
+    /// Index of the chosen candidate in the list that was asked about.
+    pub index: usize,
+    /// Its visit measure n(v) (finite, non-negative).
+    pub visits: f32,
+}
+
+/// The graph queries of an acting actor. The frontier-reaching questions have default bodies
+/// that never answer, so an oracle without FR support makes every FR episode a counted
+/// fallback.
 pub trait GraphOracle {
     /// A HESS exploration subgoal near `from` = φ(s_t), for training episode `episode` (the
     /// run-wide count, which gates the potential term and the push), with points in the φ of
@@ -45,6 +62,26 @@ pub trait GraphOracle {
         samples: &[ReachSample],
         phi_version: PhiVersion,
     ) -> Result<bool, ActorError>;
+
+    /// The frontier g_F seen from `from` = φ(s_0) and the route to it (SPEC §6.6), in the φ of
+    /// `phi_version`. `Ok(None)`: no frontier (graph not built, start cell unknown, nothing
+    /// reachable, no answer); the episode falls back to a normal one.
+    fn frontier_route(
+        &mut self,
+        _from: LatentPoint,
+        _phi_version: PhiVersion,
+    ) -> Result<Option<FrontierRoute>, ActorError> {
+        Ok(None)
+    }
+
+    /// The least-visited of `candidates` (count mode of an FR episode). `Ok(None)`: no answer.
+    fn least_visited(
+        &mut self,
+        _candidates: &[LatentPoint],
+        _phi_version: PhiVersion,
+    ) -> Result<Option<LeastVisitedAnswer>, ActorError> {
+        Ok(None)
+    }
 }
 
 /// An oracle without a graph: never answers, never accepts a report.
@@ -67,6 +104,22 @@ impl GraphOracle for NoGraph {
         _phi_version: PhiVersion,
     ) -> Result<bool, ActorError> {
         Ok(false)
+    }
+
+    fn frontier_route(
+        &mut self,
+        _from: LatentPoint,
+        _phi_version: PhiVersion,
+    ) -> Result<Option<FrontierRoute>, ActorError> {
+        Ok(None)
+    }
+
+    fn least_visited(
+        &mut self,
+        _candidates: &[LatentPoint],
+        _phi_version: PhiVersion,
+    ) -> Result<Option<LeastVisitedAnswer>, ActorError> {
+        Ok(None)
     }
 }
 
@@ -105,7 +158,11 @@ impl<T: GraphTransport> ServiceOracle<T> {
     /// Sends `request`; the decoded answer when the status is `Ok`, `None` (logged) otherwise.
     /// Public so other clients of the graph-service (the learner's self-imitation routes) share
     /// the encoding and status handling.
-    pub fn ask(&mut self, request: &GraphRequest, phi_version: PhiVersion) -> Option<GraphResponse> {
+    pub fn ask(
+        &mut self,
+        request: &GraphRequest,
+        phi_version: PhiVersion,
+    ) -> Option<GraphResponse> {
         let kind = request.kind();
         let header = GraphRequestHeader::new(self.next_request_id, kind, phi_version);
         self.next_request_id = self.next_request_id.wrapping_add(1);
@@ -181,4 +238,61 @@ impl<T: GraphTransport> GraphOracle for ServiceOracle<T> {
             Some(GraphResponse::Ack)
         ))
     }
+
+    fn frontier_route(
+        &mut self,
+        from: LatentPoint,
+        phi_version: PhiVersion,
+    ) -> Result<Option<FrontierRoute>, ActorError> {
+        let request = GraphRequest::FrontierRoute { from };
+        Ok(match self.ask(&request, phi_version) {
+            Some(GraphResponse::FrontierRoute(Ok(found))) if frontier_is_finite(&found) => {
+                Some(found)
+            }
+            Some(GraphResponse::FrontierRoute(Err(reason))) => {
+                tracing::debug!(%reason, "no frontier route");
+                None
+            }
+            Some(other) => {
+                tracing::warn!(answer = ?other, "unusable answer to a frontier request");
+                None
+            }
+            None => None,
+        })
+    }
+
+    fn least_visited(
+        &mut self,
+        candidates: &[LatentPoint],
+        phi_version: PhiVersion,
+    ) -> Result<Option<LeastVisitedAnswer>, ActorError> {
+        let request = GraphRequest::LeastVisited {
+            candidates: candidates.to_vec(),
+        };
+        Ok(match self.ask(&request, phi_version) {
+            Some(GraphResponse::LeastVisited { index, visits })
+                if (index as usize) < candidates.len() && visits.is_finite() && visits >= 0.0 =>
+            {
+                Some(LeastVisitedAnswer {
+                    index: index as usize,
+                    visits,
+                })
+            }
+            Some(other) => {
+                tracing::warn!(answer = ?other, n_candidates = candidates.len(), "unusable answer to a least-visited request");
+                None
+            }
+            None => None,
+        })
+    }
+}
+
+/// Every point and the distance of a frontier answer are finite.
+fn frontier_is_finite(found: &FrontierRoute) -> bool {
+    found.distance.is_finite()
+        && found
+            .route
+            .iter()
+            .chain(std::iter::once(&found.frontier))
+            .all(|p| p.iter().all(|v| v.is_finite()))
 }

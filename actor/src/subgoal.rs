@@ -17,6 +17,10 @@
 //! oracle has no answer the base source decides (a counted fallback). As in the reference code
 //! (digest §2.3 A.4, §2.5), exploration also applies while the base source is still random.
 //!
+//! Frontier-reaching episodes decide through [`crate::frontier`] while their FR mode lasts; the
+//! sources [`SubgoalSource::FrontierRoute`] and [`SubgoalSource::FrontierCount`] name those
+//! decisions (never an episode's base source).
+//!
 //! Invariant: a decision draws its random numbers only from the actor's generator, in a fixed
 //! order (the exploration draw first, when the gate is open, then the base source's draws if it
 //! decides), so a seed and the oracle's answers fix every subgoal.
@@ -40,6 +44,11 @@ pub enum SubgoalSource {
     Policy,
     /// HESS exploration: the graph-service's subgoal near φ(s_t) (SPEC §6.4).
     Explore,
+    /// Frontier-reaching navigation: a waypoint on the route to the frontier (SPEC §6.6;
+    /// [`crate::frontier`]).
+    FrontierRoute,
+    /// Frontier-reaching count mode: the least-visited candidate near φ(s_t).
+    FrontierCount,
 }
 
 /// HESS exploration of one episode: the run-wide schedule values it was started with.
@@ -79,7 +88,18 @@ impl SubgoalSource {
             Self::UniformRandom => DecisionKind::Random,
             Self::Policy => DecisionKind::Policy,
             Self::Explore => DecisionKind::Explore,
+            Self::FrontierRoute => DecisionKind::FrontierRoute,
+            Self::FrontierCount => DecisionKind::FrontierCount,
         }
+    }
+
+    /// Whether the subgoal was chosen by the graph (HESS explore or FR): such segments report
+    /// their reaching error to the potential map (digest §5.3: "count/FR-chosen" segments).
+    pub fn is_graph_chosen(self) -> bool {
+        matches!(
+            self,
+            Self::Explore | Self::FrontierRoute | Self::FrontierCount
+        )
     }
 }
 
@@ -151,7 +171,10 @@ impl SubgoalPlan {
         }
         match self.base {
             SubgoalSource::UniformRandom => sample_uniform(inputs.abs_range, rng, delta),
-            SubgoalSource::Policy | SubgoalSource::Explore => {
+            SubgoalSource::Policy
+            | SubgoalSource::Explore
+            | SubgoalSource::FrontierRoute
+            | SubgoalSource::FrontierCount => {
                 sample_gaussian(&nets.high_head(inputs.obs, inputs.goal)?, rng, delta)
             }
         }

@@ -323,7 +323,8 @@ pub struct AsiConfig {
     /// Source: code.
     pub count_mode_candidates: usize,
     /// How count mode scores candidates: `"graph_visits"` (default, paper Eq. 10) or
-    /// `"future_count"` (code: the HESS future-count hash).
+    /// `"future_count"` (code: the HESS future-count hash; refused by the config check while
+    /// `frontier_reaching` is on, as the graph-service does not score it yet).
     pub count_mode_score: CountModeScore,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
@@ -412,6 +413,13 @@ impl AsiConfig {
             "asi.count_mode_candidates",
             self.count_mode_candidates as u64,
         );
+        if self.frontier_reaching && self.count_mode_score == CountModeScore::FutureCount {
+            c.issue(
+                "asi.count_mode_score",
+                "future_count",
+                "is not supported yet: the graph-service scores FR count-mode candidates by graph visits only; use \"graph_visits\"",
+            );
+        }
         c.non_negative("asi.si_alpha", self.si_alpha);
         c.non_negative("asi.si_beta", self.si_beta);
         c.at_least_one("asi.si_batch_size", self.si_batch_size as u64);

@@ -1,0 +1,696 @@
+//! Frontier-reaching episodes (SPEC §6.6, digest §7): the pure FR logic on hand-built routes,
+//! and FR episodes of a real actor on the point-maze U task with a scripted graph oracle (a test
+//! double for the graph-service; the actor's logic is the real one).
+
+use actor::frontier::{
+    assign, count_candidates, nearest_route_index, waypoint, Assignment, FrChoice, FrontierEpisode,
+    FrontierParams, Switch,
+};
+use actor::{
+    Actor, ActorError, Chunk, ExploreAnswer, GraphOracle, GraphTransport, LeastVisitedAnswer,
+    ServiceOracle,
+};
+use protocol::graph::{
+    FrontierRoute, GraphRequestHeader, GraphResponseHeader, GraphStatus, NoRouteReason, ReachSample,
+};
+use protocol::{
+    ActorId, Config, DecisionKind, GraphRequest, GraphResponse, LatentPoint, PhiVersion,
+    PolicyVersion, RunSchedule, StepRecord, TrajectoryFlags as F, WeightsHeader,
+};
+use rand::SeedableRng;
+use rand_pcg::Pcg64Mcg;
+
+// ---------------------------------------------------------------------------------------------
+// A scripted oracle
+// ---------------------------------------------------------------------------------------------
+
+/// Answers frontier requests with `route_from(from)` and least-visited requests with the
+/// candidate of lowest `x` (or nothing), recording every question.
+struct ScriptedOracle {
+    route_from: fn(LatentPoint) -> Option<FrontierRoute>,
+    answer_least_visited: bool,
+    frontier_asked: Vec<LatentPoint>,
+    candidates_asked: Vec<Vec<LatentPoint>>,
+}
+
+impl ScriptedOracle {
+    fn new(route_from: fn(LatentPoint) -> Option<FrontierRoute>) -> Self {
+        Self {
+            route_from,
+            answer_least_visited: true,
+            frontier_asked: Vec::new(),
+            candidates_asked: Vec::new(),
+        }
+    }
+}
+
+/// The scripted visit measure: a candidate's x coordinate (shifted to be non-negative).
+fn least_x(candidates: &[LatentPoint]) -> usize {
+    (0..candidates.len())
+        .min_by(|&a, &b| candidates[a][0].total_cmp(&candidates[b][0]))
+        .unwrap()
+}
+
+impl GraphOracle for ScriptedOracle {
+    fn explore(
+        &mut self,
+        _from: LatentPoint,
+        _episode: u64,
+        _phi_version: PhiVersion,
+    ) -> Result<Option<ExploreAnswer>, ActorError> {
+        Ok(None)
+    }
+
+    fn report_reaching(
+        &mut self,
+        _samples: &[ReachSample],
+        _phi_version: PhiVersion,
+    ) -> Result<bool, ActorError> {
+        Ok(true)
+    }
+
+    fn frontier_route(
+        &mut self,
+        from: LatentPoint,
+        _phi_version: PhiVersion,
+    ) -> Result<Option<FrontierRoute>, ActorError> {
+        self.frontier_asked.push(from);
+        Ok((self.route_from)(from))
+    }
+
+    fn least_visited(
+        &mut self,
+        candidates: &[LatentPoint],
+        _phi_version: PhiVersion,
+    ) -> Result<Option<LeastVisitedAnswer>, ActorError> {
+        self.candidates_asked.push(candidates.to_vec());
+        Ok(self.answer_least_visited.then(|| LeastVisitedAnswer {
+            index: least_x(candidates),
+            visits: 0.0,
+        }))
+    }
+}
+
+/// A straight route of 16 nodes from `from`, 1.8 apart; the frontier is its last node (27 away).
+fn straight_route(from: LatentPoint) -> Option<FrontierRoute> {
+    let route: Vec<LatentPoint> = (0..16)
+        .map(|i| [from[0] + 1.5 * i as f32, from[1] - 1.0 * i as f32])
+        .collect();
+    Some(FrontierRoute {
+        frontier: *route.last().unwrap(),
+        distance: 15.0,
+        route,
+    })
+}
+
+/// A frontier on the start point itself: count mode from the first decision.
+fn frontier_here(from: LatentPoint) -> Option<FrontierRoute> {
+    Some(FrontierRoute {
+        frontier: from,
+        route: vec![from],
+        distance: 0.0,
+    })
+}
+
+fn no_route(_from: LatentPoint) -> Option<FrontierRoute> {
+    None
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pure logic on hand-built routes
+// ---------------------------------------------------------------------------------------------
+
+fn params() -> FrontierParams {
+    FrontierParams {
+        k_range: [3, 6],
+        epsilon: 8.0,
+        stuck_threshold: 1.0,
+        n_candidates: 100,
+        abs_range: 10.0,
+    }
+}
+
+fn found(route: Vec<LatentPoint>, frontier: LatentPoint) -> FrontierRoute {
+    FrontierRoute {
+        frontier,
+        route,
+        distance: 1.0,
+    }
+}
+
+/// Route along the x axis: nodes at x = 0, 2, 4, …, 18.
+fn x_route() -> Vec<LatentPoint> {
+    (0..10).map(|i| [2.0 * i as f32, 0.0]).collect()
+}
+
+#[test]
+fn the_nearest_route_point_is_the_euclidean_argmin_and_the_first_on_ties() {
+    let route = x_route();
+    assert_eq!(nearest_route_index(&route, &[4.9, 3.0]), Some(2));
+    assert_eq!(nearest_route_index(&route, &[5.1, -3.0]), Some(3));
+    assert_eq!(nearest_route_index(&route, &[-7.0, 0.0]), Some(0));
+    assert_eq!(nearest_route_index(&route, &[100.0, 0.0]), Some(9));
+    assert_eq!(
+        nearest_route_index(&route, &[5.0, 0.0]),
+        Some(2),
+        "x = 5 is as close to node 2 as to node 3: the first wins"
+    );
+    assert_eq!(nearest_route_index(&[], &[0.0, 0.0]), None);
+}
+
+#[test]
+fn the_waypoint_is_k_nodes_past_the_nearest_and_clamped_to_the_last_node() {
+    let route = x_route();
+    let frontier = [18.0, 0.0];
+    assert_eq!(waypoint(&route, frontier, &[2.2, 1.0], 3), [8.0, 0.0]);
+    assert_eq!(waypoint(&route, frontier, &[2.2, 1.0], 6), [14.0, 0.0]);
+    assert_eq!(waypoint(&route, frontier, &[12.0, 0.0], 5), [18.0, 0.0]);
+    assert_eq!(
+        waypoint(&route, frontier, &[12.0, 0.0], u32::MAX),
+        [18.0, 0.0]
+    );
+    assert_eq!(
+        waypoint(&[], [7.0, -7.0], &[0.0, 0.0], 4),
+        [7.0, -7.0],
+        "an empty route gives the frontier itself"
+    );
+}
+
+#[test]
+fn navigation_draws_k_in_the_inclusive_range_and_takes_that_node() {
+    let mut fr = FrontierEpisode::new(found(
+        (0..40).map(|i| [i as f32, 0.0]).collect(),
+        [39.0, 0.0],
+    ));
+    let mut rng = Pcg64Mcg::seed_from_u64(5);
+    let mut oracle = ScriptedOracle::new(no_route);
+    let mut seen = [false; 4];
+    for i in 0..200 {
+        // Move 2 units per decision along y so neither switch fires (30 from the frontier).
+        let at = [0.2, 2.0 * i as f32 - 200.0];
+        let decided = fr
+            .decide(at, &params(), PhiVersion(0), &mut rng, &mut oracle)
+            .unwrap();
+        let FrChoice::Waypoint { k, index } = decided.choice else {
+            panic!("navigation expected, got {decided:?}");
+        };
+        assert!((3..=6).contains(&k), "k = {k}");
+        assert_eq!(index, Some(k as usize));
+        assert_eq!(decided.subgoal, [k as f32, 0.0]);
+        assert_eq!(decided.decision_kind(), DecisionKind::FrontierRoute);
+        assert!(decided.deterministic_low());
+        seen[k as usize - 3] = true;
+    }
+    assert_eq!(seen, [true; 4], "every k of [3, 6] is drawn");
+    assert!(oracle.candidates_asked.is_empty());
+}
+
+#[test]
+fn within_epsilon_of_the_frontier_count_mode_starts_and_stays() {
+    let mut fr = FrontierEpisode::new(found(x_route(), [18.0, 0.0]));
+    let mut rng = Pcg64Mcg::seed_from_u64(1);
+    let mut oracle = ScriptedOracle::new(no_route);
+    let far = fr
+        .decide([10.0, 0.0], &params(), PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(
+        (far.switch, far.decision_kind()),
+        (None, DecisionKind::FrontierRoute)
+    );
+    // 8.0 away is not within ε = 8 (strict); 7.9 is.
+    let at_eps = fr.decide([18.0, 8.0], &params(), PhiVersion(0), &mut rng, &mut oracle);
+    assert_eq!(
+        at_eps.unwrap().switch,
+        None,
+        "exactly ε away is not within ε"
+    );
+    let near = fr
+        .decide([18.0, 7.9], &params(), PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(near.switch, Some(Switch::NearFrontier));
+    assert_eq!(near.decision_kind(), DecisionKind::FrontierCount);
+    assert!(
+        !near.deterministic_low(),
+        "count mode keeps the exploration noise"
+    );
+    assert!(fr.is_active() && fr.in_count_mode());
+    // Far again: count mode stays, no second switch, FR mode still on.
+    let later = fr
+        .decide([0.0, 30.0], &params(), PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(
+        (later.switch, later.decision_kind()),
+        (None, DecisionKind::FrontierCount)
+    );
+    assert!(fr.is_active());
+}
+
+#[test]
+fn stuck_over_the_two_previous_decisions_switches_to_count_mode_and_ends_fr_mode() {
+    let mut rng = Pcg64Mcg::seed_from_u64(2);
+    let mut oracle = ScriptedOracle::new(no_route);
+    let mut fr = FrontierEpisode::new(found(x_route(), [18.0, 0.0]));
+    let p = params();
+    let first = fr
+        .decide([0.0, 0.0], &p, PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    let second = fr
+        .decide([0.5, 0.0], &p, PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(
+        (first.switch, second.switch),
+        (None, None),
+        "two previous points needed"
+    );
+    let third = fr
+        .decide([0.5, 0.5], &p, PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(third.switch, Some(Switch::Stuck));
+    assert_eq!(
+        third.decision_kind(),
+        DecisionKind::FrontierCount,
+        "the stuck decision itself is count mode"
+    );
+    assert!(!fr.is_active(), "later decisions leave FR mode");
+
+    // Moved ≥ 1 from the decision two back: not stuck.
+    let mut moving = FrontierEpisode::new(found(x_route(), [18.0, 0.0]));
+    for at in [[0.0, 0.0], [0.6, 0.0], [1.2, 0.0], [1.8, 0.0]] {
+        let d = moving
+            .decide(at, &p, PhiVersion(0), &mut rng, &mut oracle)
+            .unwrap();
+        assert_eq!(d.switch, None, "at {at:?}");
+    }
+    assert!(moving.is_active());
+}
+
+#[test]
+fn count_mode_draws_candidates_in_the_box_and_takes_the_oracles_least_visited() {
+    let mut fr = FrontierEpisode::new(found(vec![[1.0, 1.0]], [1.0, 1.0]));
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let mut oracle = ScriptedOracle::new(no_route);
+    let at = [2.0, -3.0];
+    let decided = fr
+        .decide(at, &params(), PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(decided.choice, FrChoice::Count { fallback: false });
+    let candidates = &oracle.candidates_asked[0];
+    assert_eq!(candidates.len(), 100);
+    for c in candidates {
+        assert!(
+            (c[0] - at[0]).abs() <= 10.0 && (c[1] - at[1]).abs() <= 10.0,
+            "{c:?}"
+        );
+    }
+    assert_eq!(decided.subgoal, candidates[least_x(candidates)]);
+    // The candidates are the documented draw: the same generator state gives the same points.
+    let mut replay = Pcg64Mcg::seed_from_u64(3);
+    assert_eq!(&count_candidates(at, 10.0, 100, &mut replay), candidates);
+
+    oracle.answer_least_visited = false;
+    let unanswered = fr
+        .decide(at, &params(), PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(unanswered.choice, FrChoice::Count { fallback: true });
+    assert_eq!(
+        unanswered.subgoal, oracle.candidates_asked[1][0],
+        "the first candidate"
+    );
+}
+
+#[test]
+fn the_draw_asks_for_a_route_only_when_fr_is_on_and_fr_prob_is_positive() {
+    let phi0 = [0.5, 0.25];
+    let mut rng = Pcg64Mcg::seed_from_u64(4);
+    let mut oracle = ScriptedOracle::new(straight_route);
+    let p = params();
+    let off = assign(None, 1.0, &phi0, PhiVersion(0), &mut rng, &mut oracle).unwrap();
+    let zero = assign(Some(&p), 0.0, &phi0, PhiVersion(0), &mut rng, &mut oracle).unwrap();
+    assert_eq!((off, zero), (Assignment::Normal, Assignment::Normal));
+    assert!(oracle.frontier_asked.is_empty());
+    let Assignment::Frontier(fr) =
+        assign(Some(&p), 1.0, &phi0, PhiVersion(0), &mut rng, &mut oracle).unwrap()
+    else {
+        panic!("fr_prob = 1 with a route is an FR episode");
+    };
+    assert_eq!(oracle.frontier_asked, vec![phi0]);
+    assert_eq!(fr.route().len(), 16);
+    let mut none = ScriptedOracle::new(no_route);
+    let fallback = assign(Some(&p), 1.0, &phi0, PhiVersion(0), &mut rng, &mut none).unwrap();
+    assert_eq!(fallback, Assignment::NoRoute);
+    let drawn = (0..1000)
+        .filter(|_| {
+            let a = assign(Some(&p), 0.25, &phi0, PhiVersion(0), &mut rng, &mut oracle);
+            matches!(a.unwrap(), Assignment::Frontier(_))
+        })
+        .count();
+    assert!(
+        (170..330).contains(&drawn),
+        "fr_prob 0.25 over 1000 draws: {drawn}"
+    );
+}
+
+#[test]
+fn future_count_scoring_is_refused_with_the_field_named() {
+    let mut config = Config::default();
+    config.asi.count_mode_score = protocol::config::CountModeScore::FutureCount;
+    let err = config.validate().unwrap_err().to_string();
+    assert!(err.contains("asi.count_mode_score"), "{err}");
+    assert!(FrontierParams::from_config(&config)
+        .unwrap_err()
+        .to_string()
+        .contains("asi.count_mode_score"));
+    config.asi.frontier_reaching = false;
+    assert!(config.validate().is_ok(), "no FR, no count mode to score");
+}
+
+// ---------------------------------------------------------------------------------------------
+// FR episodes of a real actor on point-maze U
+// ---------------------------------------------------------------------------------------------
+
+/// Point maze U, small networks, c = 10, 100 steps: 10 decisions per episode.
+fn config() -> Config {
+    let mut config = Config::default();
+    config.env.task = "pointmaze-u".into();
+    config.env.episode_length = Some(100);
+    config.transport.chunk_steps = 50;
+    config.hierarchy.c = 10;
+    config.learner.high.random_episodes = 1;
+    config.learner.high.hidden = vec![32, 32];
+    config.learner.low.hidden = vec![32, 32];
+    config.encoder.hidden = vec![16, 16];
+    config
+}
+
+fn fr_schedule(fr_prob: f32) -> RunSchedule {
+    RunSchedule {
+        train_episodes: 0,
+        count_prob: 0.0,
+        fr_prob,
+    }
+}
+
+/// Reloads the actor's own weights with `schedule` and φ version `phi_version`.
+fn reload(actor: &mut Actor, schedule: RunSchedule, phi_version: u64) {
+    let bytes = actor.weights_bytes().unwrap();
+    let header = WeightsHeader::new(
+        PolicyVersion(phi_version),
+        PhiVersion(phi_version),
+        actor.layout_hash(),
+        bytes.len(),
+    )
+    .with_schedule(schedule);
+    actor.load_weights(&header, &bytes).unwrap();
+}
+
+fn actor(config: &Config, seed: u64, fr_prob: f32) -> Actor {
+    let mut actor = Actor::new(config, ActorId(0), seed).unwrap();
+    reload(&mut actor, fr_schedule(fr_prob), 1);
+    actor
+}
+
+fn decode(chunk: &Chunk) -> Vec<StepRecord> {
+    let layout = chunk.header.check(chunk.records.len()).unwrap();
+    let views = layout
+        .view_chunk(&chunk.records, chunk.header.n_steps as usize)
+        .unwrap();
+    views.iter().map(|v| v.to_record()).collect()
+}
+
+/// The chunks of the next episode.
+fn episode(actor: &mut Actor, oracle: &mut dyn GraphOracle) -> Vec<Chunk> {
+    let mut chunks = Vec::new();
+    loop {
+        let chunk = actor.next_chunk(oracle).unwrap();
+        let ended = chunk.header.flags.contains(F::EPISODE_END);
+        chunks.push(chunk);
+        if ended {
+            return chunks;
+        }
+    }
+}
+
+fn decisions(chunks: &[Chunk]) -> Vec<StepRecord> {
+    chunks
+        .iter()
+        .flat_map(decode)
+        .filter(|r| r.decision.is_decision())
+        .collect()
+}
+
+fn kinds(records: &[StepRecord]) -> Vec<DecisionKind> {
+    records.iter().map(|r| r.decision).collect()
+}
+
+#[test]
+fn an_fr_episode_follows_the_route_with_waypoints_k_nodes_ahead_and_a_far_goal() {
+    let mut config = config();
+    config.asi.stuck_threshold = 0.0; // never stuck: every decision navigates
+    let mut actor = actor(&config, 7, 1.0);
+    let mut oracle = ScriptedOracle::new(straight_route);
+    let chunks = episode(&mut actor, &mut oracle);
+    let records: Vec<StepRecord> = chunks.iter().flat_map(decode).collect();
+    assert_eq!(
+        oracle.frontier_asked,
+        vec![[records[0].phi[0], records[0].phi[1]]]
+    );
+    let route = straight_route(oracle.frontier_asked[0]).unwrap().route;
+    let decided = decisions(&chunks);
+    assert_eq!(kinds(&decided), vec![DecisionKind::FrontierRoute; 10]);
+    let mut ks = Vec::new();
+    for r in &decided {
+        // Brute force: the nearest node, then which k in [3, 6] gives the recorded subgoal.
+        let nearest = (0..route.len())
+            .min_by(|&a, &b| dist(&route[a], &r.phi).total_cmp(&dist(&route[b], &r.phi)))
+            .unwrap();
+        let index = route
+            .iter()
+            .position(|p| p[..] == r.subgoal[..])
+            .expect("a route node");
+        let k = index - nearest;
+        assert!((3..=6).contains(&k) || index == route.len() - 1, "k = {k}");
+        ks.push(k);
+        let delta: Vec<f32> = r.subgoal.iter().zip(&r.phi).map(|(s, p)| s - p).collect();
+        assert_eq!(
+            r.high_action, delta,
+            "stored action = subgoal − φ(s_t), unclipped"
+        );
+    }
+    ks.sort_unstable();
+    ks.dedup();
+    assert!(ks.len() > 1, "k is drawn per decision: {ks:?}");
+    assert!(
+        chunks.iter().all(|c| c.header.flags.contains(F::FAR_GOAL)),
+        "FR episodes get a far goal"
+    );
+    let maze = envs::make("pointmaze-u").unwrap();
+    let goal = [records[0].goal[0], records[0].goal[1]];
+    assert!(maze
+        .maze()
+        .unwrap()
+        .is_far_goal_with_fraction(goal, config.exploration.far_goal_fraction));
+    let stats = actor.stats().frontier;
+    assert_eq!((stats.n_episodes, stats.n_no_route), (1, 0));
+    assert_eq!(
+        (stats.n_waypoint_decisions, stats.n_count_decisions),
+        (10, 0)
+    );
+    assert_eq!(actor.stats().n_decisions, 10);
+}
+
+fn dist(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f32>()
+        .sqrt()
+}
+
+#[test]
+fn a_stuck_fr_episode_counts_once_then_decides_with_its_normal_source() {
+    let mut config = config();
+    config.asi.stuck_threshold = 1.0e6; // always stuck once two decisions are behind
+    let mut actor = actor(&config, 8, 1.0);
+    let mut oracle = ScriptedOracle::new(straight_route);
+    let decided = decisions(&episode(&mut actor, &mut oracle));
+    let mut expected = vec![DecisionKind::FrontierRoute; 2];
+    expected.push(DecisionKind::FrontierCount);
+    expected.extend([DecisionKind::Random; 7]); // the actor's first episode is a random one
+    assert_eq!(kinds(&decided), expected);
+    let candidates = &oracle.candidates_asked;
+    assert_eq!(candidates.len(), 1);
+    assert_eq!(decided[2].subgoal, candidates[0][least_x(&candidates[0])]);
+    let stats = actor.stats().frontier;
+    assert_eq!(
+        (stats.n_stuck_switches, stats.n_near_frontier_switches),
+        (1, 0)
+    );
+    assert_eq!(
+        (stats.n_waypoint_decisions, stats.n_count_decisions),
+        (2, 1)
+    );
+}
+
+#[test]
+fn near_the_frontier_every_decision_is_the_least_visited_candidate() {
+    let mut config = config();
+    config.asi.stuck_threshold = 0.0;
+    let mut actor = actor(&config, 9, 1.0);
+    let mut oracle = ScriptedOracle::new(frontier_here);
+    let decided = decisions(&episode(&mut actor, &mut oracle));
+    assert_eq!(kinds(&decided), vec![DecisionKind::FrontierCount; 10]);
+    assert_eq!(oracle.candidates_asked.len(), 10);
+    for (r, candidates) in decided.iter().zip(&oracle.candidates_asked) {
+        assert_eq!(r.subgoal, candidates[least_x(candidates)]);
+        for c in candidates {
+            assert!(dist(c, &r.phi) <= 10.0 * 2f32.sqrt() + 1e-4);
+        }
+    }
+    let stats = actor.stats().frontier;
+    assert_eq!(
+        (stats.n_near_frontier_switches, stats.n_count_decisions),
+        (1, 10)
+    );
+}
+
+#[test]
+fn without_a_route_the_episode_is_normal_and_the_fallback_is_counted() {
+    let mut actor = actor(&config(), 10, 1.0);
+    let mut oracle = ScriptedOracle::new(no_route);
+    for _ in 0..2 {
+        let decided = decisions(&episode(&mut actor, &mut oracle));
+        assert!(kinds(&decided)
+            .iter()
+            .all(|k| matches!(k, DecisionKind::Random | DecisionKind::Policy)));
+    }
+    assert_eq!(oracle.frontier_asked.len(), 2);
+    let stats = actor.stats().frontier;
+    assert_eq!(
+        (stats.n_episodes, stats.n_no_route, stats.n_goals_forced),
+        (0, 2, 0)
+    );
+}
+
+#[test]
+fn no_fr_episode_when_the_switch_is_off_or_fr_prob_is_zero() {
+    let mut off = config();
+    off.asi.frontier_reaching = false;
+    for (config, fr_prob) in [(off, 1.0), (config(), 0.0)] {
+        let mut actor = actor(&config, 11, fr_prob);
+        let mut oracle = ScriptedOracle::new(straight_route);
+        for _ in 0..2 {
+            let decided = decisions(&episode(&mut actor, &mut oracle));
+            assert!(kinds(&decided)
+                .iter()
+                .all(|k| matches!(k, DecisionKind::Random | DecisionKind::Policy)));
+        }
+        assert!(oracle.frontier_asked.is_empty());
+        assert_eq!(actor.stats().frontier, actor::FrontierStats::default());
+    }
+}
+
+#[test]
+fn a_new_phi_mid_episode_ends_fr_mode() {
+    let mut config = config();
+    config.asi.stuck_threshold = 0.0;
+    let mut actor = actor(&config, 12, 1.0);
+    let mut oracle = ScriptedOracle::new(straight_route);
+    // A chunk of 50 records is cut once the 51st step is taken: 6 decisions (t = 0, 10, …, 50).
+    let first = actor.next_chunk(&mut oracle).unwrap();
+    reload(&mut actor, fr_schedule(1.0), 2);
+    let mut chunks = vec![first];
+    chunks.extend(episode(&mut actor, &mut oracle));
+    let decided = decisions(&chunks);
+    let mut expected = vec![DecisionKind::FrontierRoute; 6];
+    expected.extend([DecisionKind::Random; 4]);
+    assert_eq!(kinds(&decided), expected);
+    assert_eq!(actor.stats().frontier.n_ended_by_new_phi, 1);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The protocol side: ServiceOracle's FR questions
+// ---------------------------------------------------------------------------------------------
+
+/// Answers every request with `response` (status `Ok`), recording the requests.
+struct Canned {
+    response: GraphResponse,
+    requests: Vec<GraphRequest>,
+}
+
+impl GraphTransport for Canned {
+    fn call(
+        &mut self,
+        header: &GraphRequestHeader,
+        body: &[u8],
+    ) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+        let request: GraphRequest = protocol::decode(body).map_err(|e| e.to_string())?;
+        assert_eq!(header.kind().unwrap(), request.kind());
+        self.requests.push(request);
+        let reply = GraphResponseHeader::answering(header, GraphStatus::Ok, 3, PhiVersion(2));
+        Ok((reply, protocol::encode(&self.response).unwrap()))
+    }
+}
+
+fn service(response: GraphResponse) -> ServiceOracle<Canned> {
+    ServiceOracle::new(Canned {
+        response,
+        requests: Vec::new(),
+    })
+}
+
+#[test]
+fn the_service_oracle_asks_for_frontiers_and_refuses_unusable_routes() {
+    let good = straight_route([1.0, 2.0]).unwrap();
+    let mut oracle = service(GraphResponse::FrontierRoute(Ok(good.clone())));
+    let answer = oracle.frontier_route([1.0, 2.0], PhiVersion(2)).unwrap();
+    assert_eq!(answer, Some(good.clone()));
+    assert_eq!(
+        oracle.transport().requests,
+        vec![GraphRequest::FrontierRoute { from: [1.0, 2.0] }]
+    );
+    let mut nan_route = good.clone();
+    nan_route.route[3][1] = f32::NAN;
+    let mut inf_distance = good;
+    inf_distance.distance = f32::INFINITY;
+    for bad in [
+        GraphResponse::FrontierRoute(Ok(nan_route)),
+        GraphResponse::FrontierRoute(Ok(inf_distance)),
+        GraphResponse::FrontierRoute(Err(NoRouteReason::StartUnknown)),
+        GraphResponse::Ack,
+    ] {
+        let mut oracle = service(bad.clone());
+        assert_eq!(
+            oracle.frontier_route([1.0, 2.0], PhiVersion(2)).unwrap(),
+            None,
+            "{bad:?}"
+        );
+    }
+}
+
+#[test]
+fn the_service_oracle_takes_only_in_range_finite_least_visited_answers() {
+    let candidates = [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]];
+    let mut oracle = service(GraphResponse::LeastVisited {
+        index: 2,
+        visits: 4.0,
+    });
+    let answer = oracle.least_visited(&candidates, PhiVersion(2)).unwrap();
+    assert_eq!(
+        answer,
+        Some(LeastVisitedAnswer {
+            index: 2,
+            visits: 4.0
+        })
+    );
+    assert_eq!(
+        oracle.transport().requests,
+        vec![GraphRequest::LeastVisited {
+            candidates: candidates.to_vec()
+        }]
+    );
+    for (index, visits) in [(3, 0.0), (0, f32::NAN), (0, -1.0)] {
+        let mut oracle = service(GraphResponse::LeastVisited { index, visits });
+        let answer = oracle.least_visited(&candidates, PhiVersion(2)).unwrap();
+        assert_eq!(answer, None, "index {index}, visits {visits}");
+    }
+}
