@@ -31,13 +31,14 @@
 //! Work is done in slices ([`PhiTrainer::run_slice`]) so that the owner stays responsive.
 
 use candle_core::{DType, Device, Tensor, Var};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};
+use candle_nn::{Optimizer, VarBuilder, VarMap};
 use nets::{prefix, Encoder, NetsSpec};
 use protocol::config::StableWeighting;
 use protocol::Config;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
+use crate::adam::{Adam, AdamParams};
 use crate::error::LearnerError;
 use crate::phi::losses::{stable_loss, triplet_loss, TripletStats};
 use crate::phi::store::{Candidate, PhiStore};
@@ -189,7 +190,7 @@ pub struct PhiTrainer {
     encoder: Encoder,
     vars: Vec<Var>,
     names: Vec<String>,
-    opt: AdamW,
+    opt: Adam,
     rng: Pcg64Mcg,
     next_round: u64,
     active: Option<ActiveRound>,
@@ -523,17 +524,10 @@ pub fn phi_objective(
     })
 }
 
-/// φ's optimiser: Adam (candle's `AdamW` with weight decay 0; PyTorch's Adam defaults
-/// β = (0.9, 0.999), ε = 1e-8) at learning rate `lr`.
-pub fn phi_optimizer(vars: Vec<Var>, lr: f64) -> Result<AdamW, LearnerError> {
-    Ok(AdamW::new(
-        vars,
-        ParamsAdamW {
-            lr,
-            weight_decay: 0.0,
-            ..ParamsAdamW::default()
-        },
-    )?)
+/// φ's optimiser: PyTorch's Adam ([`crate::adam::Adam`], defaults β = (0.9, 0.999),
+/// ε = 1e-8) at learning rate `lr`.
+pub fn phi_optimizer(vars: Vec<Var>, lr: f64) -> Result<Adam, LearnerError> {
+    Ok(Adam::new(vars, AdamParams::with_lr(lr))?)
 }
 
 /// The state at `(run, t)` or an error (cannot happen while the store is frozen).

@@ -6,14 +6,16 @@
 //! parameters are the ones published), the online and target critics are [`TwinCritic`]s on
 //! two separate `VarMap`s with identical names; the target starts as a copy of the online
 //! critic and follows it by `target ← τ·online + (1 − τ)·target` after every update.
-//! Optimisers: Adam (candle's `AdamW` with weight decay 0, which is exactly Adam).
+//! Optimisers: PyTorch's Adam ([`crate::adam::Adam`], state exportable for checkpoints).
 //!
 //! Inputs come as a [`SacBatch`]: the policy sees `[head, tail]`, the critic
 //! `[head, action, tail]` (low: head `[obs, φ]`, tail `subgoal`; high: head `[obs, goal]`, no
 //! tail). Policy noise is passed in (`eps`, standard normal) so the learner owns all randomness.
 
 use candle_core::{Tensor, Var};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use candle_nn::Optimizer;
+
+use crate::adam::{Adam, AdamParams};
 use nets::{GaussianPolicy, TwinCritic};
 
 use crate::error::LearnerError;
@@ -93,7 +95,7 @@ enum Temperature {
     Fixed(f64),
     Tuned {
         log_alpha: Var,
-        opt: AdamW,
+        opt: Adam,
         target_entropy: f64,
     },
 }
@@ -139,16 +141,9 @@ impl Temperature {
     }
 }
 
-/// Adam (AdamW without weight decay).
-fn adam(vars: Vec<Var>, lr: f64) -> Result<AdamW, LearnerError> {
-    Ok(AdamW::new(
-        vars,
-        ParamsAdamW {
-            lr,
-            weight_decay: 0.0,
-            ..ParamsAdamW::default()
-        },
-    )?)
+/// Adam with PyTorch's defaults at learning rate `lr`.
+fn adam(vars: Vec<Var>, lr: f64) -> Result<Adam, LearnerError> {
+    Ok(Adam::new(vars, AdamParams::with_lr(lr))?)
 }
 
 /// The networks of one level handed to [`SacLevel::new`].
@@ -173,8 +168,8 @@ pub struct SacNets {
 pub struct SacLevel {
     level: &'static str,
     nets: SacNets,
-    policy_opt: AdamW,
-    critic_opt: AdamW,
+    policy_opt: Adam,
+    critic_opt: Adam,
     temperature: Temperature,
     params: SacParams,
 }
@@ -281,6 +276,19 @@ impl SacLevel {
         self.check_finite("actor loss", stats.loss)?;
         self.policy_opt.backward_step(&loss)?;
         Ok((stats, log_prob.detach()))
+    }
+
+    /// One Adam step of the policy optimiser on an extra policy loss (self-imitation,
+    /// [`crate::si`]); `value` is the loss as a number, checked to be finite before stepping.
+    pub fn policy_step(
+        &mut self,
+        loss: &Tensor,
+        what: &'static str,
+        value: f64,
+    ) -> Result<(), LearnerError> {
+        self.check_finite(what, value)?;
+        self.policy_opt.backward_step(loss)?;
+        Ok(())
     }
 
     /// target ← τ·online + (1 − τ)·target.
