@@ -78,6 +78,7 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             "episodes": stats.episodes, "policy_version": stats.policy_version.0,
             "weights_rejected": stats.n_weights_rejected, "explore_decisions": stats.n_explore_decisions,
             "explore_fallbacks": stats.n_explore_fallbacks, "reach_reports": stats.n_reach_reports,
+            "fr_episodes": stats.frontier.n_episodes, "fr_no_route": stats.frontier.n_no_route,
             "stop_reason": reason,
         }),
     )
@@ -146,7 +147,21 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
         ("actor/reach_samples_sent".to_owned(), s.n_reach_samples_sent as f64),
         ("actor/reach_samples_dropped".to_owned(), s.n_reach_samples_dropped as f64),
         ("actor/count_prob".to_owned(), f64::from(s.schedule.count_prob)),
+        ("actor/fr_prob".to_owned(), f64::from(s.schedule.fr_prob)),
     ];
+    let fr = &s.frontier;
+    let frontier = [
+        ("actor/fr/episodes", fr.n_episodes),
+        ("actor/fr/no_route", fr.n_no_route),
+        ("actor/fr/goals_forced", fr.n_goals_forced),
+        ("actor/fr/waypoint_decisions", fr.n_waypoint_decisions),
+        ("actor/fr/count_decisions", fr.n_count_decisions),
+        ("actor/fr/count_fallbacks", fr.n_count_fallbacks),
+        ("actor/fr/near_frontier_switches", fr.n_near_frontier_switches),
+        ("actor/fr/stuck_switches", fr.n_stuck_switches),
+        ("actor/fr/ended_by_new_phi", fr.n_ended_by_new_phi),
+    ];
+    values.extend(frontier.into_iter().map(|(name, v)| (name.to_owned(), v as f64)));
     let optional = [
         ("actor/last_episode_reach_error", s.last_episode_reach_error),
         ("actor/last_episode_explore_reach_error", s.last_episode_explore_reach_error),
