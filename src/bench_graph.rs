@@ -1,8 +1,8 @@
 //! `asi bench graph`: graph-service speed on synthetic trajectories ([`graph_service::bench`]).
 //!
-//! Prints, as `name: value` lines: the rebuild time for each store size (φ re-mapping with
-//! batched candle inference, graph construction, visit/future-count recount — timed
-//! separately), route query latency p50/p99 on the graph of the first size (capped at
+//! Prints, as `name: value` lines: the rebuild time for each store size (φ re-mapping with the
+//! fused forward on `--remap-threads` threads and its FLOP rate, graph construction,
+//! visit/future-count recount — timed separately; `--candle` adds the former candle re-map), route query latency p50/p99 on the graph of the first size (capped at
 //! `graph.max_nodes` = 5,000 nodes), the time of all-pairs shortest paths (Dijkstra from every
 //! node) on that graph, and the same measurements by scipy (`scripts/bench_graph_scipy.py`,
 //! which installs scipy into its own venv) on the same graph and queries, with ratios. Without
@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use clap::Args;
-use graph_service::bench::{quantile, random_phi, synthetic_store, time_rebuild, time_routes, RouteSample};
+use graph_service::bench::{quantile, random_phi, synthetic_store, time_candle_map, time_rebuild, time_routes, RouteSample};
 use graph_service::dijkstra::shortest_paths;
 use graph_service::LatentGraph;
 use protocol::Config;
@@ -41,17 +41,28 @@ pub struct BenchGraphArgs {
     /// Skip the scipy comparison.
     #[arg(long)]
     pub no_python: bool,
+    /// Threads of the φ re-map (`graph.remap_threads`; default: the config's, 2).
+    #[arg(long)]
+    pub remap_threads: Option<usize>,
+    /// Also time the former candle re-map (single thread, 4096-row batches) on the first size.
+    #[arg(long)]
+    pub candle: bool,
 }
 
 pub fn run(args: &BenchGraphArgs) -> anyhow::Result<()> {
     anyhow::ensure!(!args.sizes.is_empty() && args.sizes.iter().all(|&s| s > 0), "--sizes must list positive step counts");
     anyhow::ensure!(args.episode_len > 0 && args.queries > 0, "--episode-len and --queries must be positive");
-    let config = Config::default();
+    let mut config = Config::default();
+    if let Some(threads) = args.remap_threads {
+        anyhow::ensure!((1..=256).contains(&threads), "--remap-threads must be in [1, 256], got {threads}");
+        config.graph.remap_threads = threads;
+    }
     println!("obs_dim: {OBS_DIM}");
     println!("max_nodes: {}", config.graph.max_nodes);
+    println!("remap_threads: {}", config.graph.remap_threads);
     let mut route_graph = None;
-    for &size in &args.sizes {
-        let graph = rebuild(&config, size, args)?;
+    for (i, &size) in args.sizes.iter().enumerate() {
+        let graph = rebuild(&config, size, args, args.candle && i == 0)?;
         route_graph.get_or_insert(graph);
     }
     let graph = route_graph.context("no store size measured")?;
@@ -64,8 +75,9 @@ pub fn run(args: &BenchGraphArgs) -> anyhow::Result<()> {
     compare_with_scipy(&graph, &samples, &ours)
 }
 
-/// Builds a store of `size` steps, times its rebuild, prints the figures; returns the graph.
-fn rebuild(config: &Config, size: u64, args: &BenchGraphArgs) -> anyhow::Result<LatentGraph> {
+/// Builds a store of `size` steps, times its rebuild (and the candle re-map if `candle`),
+/// prints the figures; returns the graph.
+fn rebuild(config: &Config, size: u64, args: &BenchGraphArgs, candle: bool) -> anyhow::Result<LatentGraph> {
     let label = size_label(size);
     let start = Instant::now();
     let store = synthetic_store(config, OBS_DIM, size, args.episode_len, args.seed);
@@ -75,7 +87,16 @@ fn rebuild(config: &Config, size: u64, args: &BenchGraphArgs) -> anyhow::Result<
     println!("rebuild_{label}_stored_steps: {}", timing.n_steps);
     println!("rebuild_{label}_nodes: {}", timing.n_nodes);
     println!("rebuild_{label}_edges: {}", timing.n_edges);
+    // 2 FLOP per multiply-add; the bias adds and ReLUs are not counted.
+    let flop = 2.0 * phi.fused().macs_per_row() as f64 * timing.n_steps as f64;
+    println!("rebuild_{label}_phi_kernel: {:?}", phi.fused().isa());
     println!("rebuild_{label}_phi_map_secs: {:.3}", timing.map_secs);
+    println!("rebuild_{label}_phi_map_gflop_per_sec: {:.1}", flop / timing.map_secs / 1e9);
+    if candle {
+        let candle_secs = time_candle_map(&store, &phi)?;
+        println!("rebuild_{label}_phi_map_candle_secs: {candle_secs:.3}");
+        println!("rebuild_{label}_phi_map_candle_gflop_per_sec: {:.1}", flop / candle_secs / 1e9);
+    }
     println!("rebuild_{label}_graph_build_secs: {:.3}", timing.build_secs);
     println!("rebuild_{label}_counts_secs: {:.3}", timing.counts_secs);
     println!("rebuild_{label}_total_secs: {:.3}", timing.map_secs + timing.build_secs + timing.counts_secs);

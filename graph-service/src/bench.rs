@@ -10,12 +10,13 @@
 //! φ re-mapping is timed with the real encoder of the default config on the same observations.
 //!
 //! A rebuild is what [`crate::GraphService::load_weights`] does: re-map every stored state
-//! (batched candle inference, one call per trajectory), rebuild the graph, recount the visit
-//! counts and recompute HESS's future counts. The three parts are timed separately.
+//! (the fused forward of [`crate::fused`] on `graph.remap_threads` threads), rebuild the graph,
+//! recount the visit counts and recompute HESS's future counts. The three parts are timed
+//! separately; [`time_candle_map`] times the former candle re-map for comparison.
 
 use std::time::Instant;
 
-use candle_core::Device;
+use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
 use protocol::config::Config;
 use protocol::{ActorId, EpisodeId, LatentPoint, PhiVersion};
@@ -29,6 +30,7 @@ use crate::graph::{GraphBuilder, LatentGraph, NodeId};
 use crate::grid::Grid;
 use crate::hess::{HessMaps, HessParams};
 use crate::phi::Phi;
+use crate::service::remap;
 use crate::store::{ChunkStates, TrajectoryStore};
 
 /// Largest xy step of the synthetic walks per env step, φ units.
@@ -120,21 +122,21 @@ pub fn random_phi(config: &Config, obs_dim: usize, seed: u64) -> Result<Phi, Gra
     let params = VarMap::new();
     let vb = nets::seeded_var_builder(&params, seed, &Device::Cpu);
     let set = nets::PolicySet::new(&spec, &vb)?;
-    Ok(Phi::new(set.encoder, PhiVersion(1)))
+    Phi::new(set.encoder, PhiVersion(1))
 }
 
-/// Times one rebuild of `store` (see the module doc) and returns the graph with the timings.
+/// Times one rebuild of `store` (see the module doc), the re-map on
+/// `config.graph.remap_threads` threads as the service runs it, and returns the graph with
+/// the timings.
 pub fn time_rebuild(
     config: &Config,
     store: &TrajectoryStore,
     phi: &Phi,
 ) -> Result<(RebuildTiming, LatentGraph), GraphServiceError> {
     let start = Instant::now();
-    let mut n_mapped = 0usize;
-    for trajectory in store.trajectories() {
-        n_mapped += phi.map(trajectory.obs())?.len();
-    }
+    let mapped = remap(phi, store, config.graph.remap_threads)?;
     let map_secs = start.elapsed().as_secs_f64();
+    let n_mapped: usize = mapped.iter().map(Vec::len).sum();
     if n_mapped as u64 != store.n_states() {
         return Err(GraphServiceError::Internal(format!(
             "mapped {n_mapped} of {} states",
@@ -172,6 +174,20 @@ pub fn time_rebuild(
         n_edges: graph.n_edges(),
     };
     Ok((timing, graph))
+}
+
+/// Times the map of every stored state with the candle encoder on 4096-row batches (the
+/// re-map before the fused forward), for comparison; seconds.
+pub fn time_candle_map(store: &TrajectoryStore, phi: &Phi) -> Result<f64, GraphServiceError> {
+    let obs_dim = phi.encoder().obs_dim();
+    let start = Instant::now();
+    for trajectory in store.trajectories() {
+        for batch in trajectory.obs().chunks(4096 * obs_dim) {
+            let input = Tensor::from_slice(batch, (batch.len() / obs_dim, obs_dim), &Device::Cpu)?;
+            phi.encoder().forward(&input)?.to_vec2::<f32>()?;
+        }
+    }
+    Ok(start.elapsed().as_secs_f64())
 }
 
 /// One timed route query.

@@ -52,6 +52,14 @@ pub enum GraphServiceError {
         /// The offending output.
         point: [f32; 2],
     },
+    /// An observation buffer is not a whole number of rows.
+    #[error("{len} floats of observations are not a whole number of {obs_dim}-float rows")]
+    ObsLength {
+        /// Floats given.
+        len: usize,
+        /// Floats per observation row.
+        obs_dim: usize,
+    },
     /// A broken internal invariant (a bug); the operation changed nothing.
     #[error("internal error: {0}")]
     Internal(String),

@@ -1,5 +1,5 @@
 //! The graph-service of ASI as a transport-agnostic state machine (SPEC §3, §6.5–6.7): no I/O
-//! and no threads; the `asi graph-service` binary wires [`GraphService`] to iceoryx2, and
+//! and no threads of its own beyond the scoped workers of a φ re-map; the `asi graph-service` binary wires [`GraphService`] to iceoryx2, and
 //! serial mode and tests call it directly.
 //!
 //! - [`store`]: trajectory store (per episode, in order), bounded, oldest episodes evicted first.
@@ -9,7 +9,9 @@
 //! - [`frontier`]: frontier choice, routes, SI route queries with the frontier fallback.
 //! - [`counts`]: visit counts n(v) (Eq. 10) and the least-visited candidate.
 //! - [`hess`]: HESS's visit, future-count and potential maps and the explore subgoal (SPEC §6.4).
-//! - [`phi`]: the encoder φ loaded from weights messages; batched re-mapping of the store.
+//! - [`phi`]: the encoder φ loaded from weights messages; re-mapping of the store, its rows
+//!   split over scoped worker threads.
+//! - [`fused`]: the hand-fused CPU forward of φ's MLP that the mapping runs.
 //! - [`bench`]: synthetic stores and timings for `asi bench graph`.
 //! - [`server`]: [`GraphService::handle`], the request handler.
 //! - [`service`]: [`GraphService`] itself: ingest, weights, rebuild, queries, stats.
@@ -22,6 +24,7 @@ pub mod counts;
 pub mod dijkstra;
 pub mod error;
 pub mod frontier;
+pub mod fused;
 pub mod graph;
 pub mod grid;
 pub mod hess;

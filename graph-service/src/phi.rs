@@ -1,5 +1,6 @@
 //! The graph-service's copy of the encoder φ: loading it from a weights message and mapping
-//! stored states through it in batches (candle, CPU).
+//! stored states through it (the fused CPU forward of [`crate::fused`], bit-identical to the
+//! candle encoder on the default network; a re-map splits the store over scoped threads).
 //!
 //! Which weights messages are accepted: the learner publishes the actor-side set (encoder,
 //! high policy, low policy; `nets::prefix::ACTOR_SIDE`) on `…/weights`. The header's layout
@@ -11,16 +12,17 @@
 //! Anything else is refused with both expected hashes named. Loading goes into a fresh
 //! parameter set, so a refused payload never touches the φ in use.
 
-use candle_core::{Device, Tensor};
+use candle_core::Device;
 use candle_nn::VarMap;
 use nets::{prefix, Encoder, NetsSpec, PolicySet};
 use protocol::{LatentPoint, PhiVersion, Versioned, WeightsHeader};
 
 use crate::error::GraphServiceError;
+use crate::fused::{FusedMlp, Scratch};
 
-/// States per encoder forward pass when re-mapping the store: large enough to amortise the
-/// call overhead, small enough that the `[rows, hidden]` activations stay a few MB.
-const MAP_BATCH_ROWS: usize = 4096;
+/// Fewest rows worth a thread of their own in [`Phi::map_all`] (a thread costs tens of µs;
+/// this many rows take about a millisecond).
+const MIN_ROWS_PER_THREAD: usize = 16_384;
 
 /// Builds φ's from weights messages for one network spec.
 #[derive(Debug, Clone)]
@@ -38,11 +40,13 @@ enum Payload {
     EncoderOnly,
 }
 
-/// A loaded encoder and its version. The encoder's tensors share storage with the parameter
-/// set they were loaded into, so they keep the loaded values after the set is dropped.
+/// A loaded encoder, its fused copy for mapping ([`crate::fused`]) and its version. The
+/// encoder's tensors share storage with the parameter set they were loaded into, so they keep
+/// the loaded values after the set is dropped.
 #[derive(Debug, Clone)]
 pub struct Phi {
     encoder: Encoder,
+    fused: FusedMlp,
     version: PhiVersion,
 }
 
@@ -81,10 +85,7 @@ impl PhiLoader {
                 nets::load_safetensors_bytes(&nets::subset(&params, &[prefix::ENCODER])?, bytes)?
             }
         }
-        Ok(Phi {
-            encoder: set.encoder,
-            version: header.phi_version,
-        })
+        Phi::new(set.encoder, header.phi_version)
     }
 
     fn payload_kind(
@@ -119,8 +120,13 @@ fn build_set(spec: &NetsSpec, seed: u64) -> Result<(VarMap, PolicySet), GraphSer
 
 impl Phi {
     /// φ from an encoder built elsewhere (benchmarks, tests), at `version`.
-    pub fn new(encoder: Encoder, version: PhiVersion) -> Self {
-        Self { encoder, version }
+    pub fn new(encoder: Encoder, version: PhiVersion) -> Result<Self, GraphServiceError> {
+        let fused = FusedMlp::from_mlp(encoder.mlp())?;
+        Ok(Self {
+            encoder,
+            fused,
+            version,
+        })
     }
 
     /// Version of these weights.
@@ -128,24 +134,211 @@ impl Phi {
         self.version
     }
 
-    /// φ of each state in `obs` (`n × obs_dim` floats, row-major), in batches.
+    /// The candle encoder these weights were loaded into (the reference for [`Phi::map`]).
+    pub fn encoder(&self) -> &Encoder {
+        &self.encoder
+    }
+
+    /// The fused copy that [`Phi::map`] and [`Phi::map_all`] run.
+    pub fn fused(&self) -> &FusedMlp {
+        &self.fused
+    }
+
+    /// φ of each state in `obs` (`n × obs_dim` floats, row-major), on this thread.
     pub fn map(&self, obs: &[f32]) -> Result<Vec<LatentPoint>, GraphServiceError> {
-        let obs_dim = self.encoder.obs_dim();
-        let mut out = Vec::with_capacity(obs.len() / obs_dim.max(1));
-        for batch in obs.chunks(MAP_BATCH_ROWS * obs_dim) {
-            let rows = batch.len() / obs_dim;
-            let input = Tensor::from_slice(batch, (rows, obs_dim), &Device::Cpu)?;
-            let latents = self.encoder.forward(&input)?.to_vec2::<f32>()?;
-            out.extend(latents.into_iter().map(|row| to_point(&row)));
-        }
+        let mut out = Vec::new();
+        self.fused
+            .map_into(obs, &mut out, &mut Scratch::default())?;
         Ok(out)
+    }
+
+    /// [`Phi::map`] of every batch, the batches split into at most `n_threads` contiguous groups
+    /// of about equal rows, one scoped thread each (the calling thread takes the first group).
+    /// The result does not depend on `n_threads`: every row is mapped by the same code.
+    pub fn map_all(
+        &self,
+        batches: &[&[f32]],
+        n_threads: usize,
+    ) -> Result<Vec<Vec<LatentPoint>>, GraphServiceError> {
+        let groups = split_evenly(
+            batches,
+            n_threads.max(1),
+            MIN_ROWS_PER_THREAD * self.fused.in_dim(),
+        );
+        let map_group = |group: &[&[f32]]| -> Result<Vec<Vec<LatentPoint>>, GraphServiceError> {
+            let mut scratch = Scratch::default();
+            group
+                .iter()
+                .map(|obs| {
+                    let mut out = Vec::new();
+                    self.fused.map_into(obs, &mut out, &mut scratch)?;
+                    Ok(out)
+                })
+                .collect()
+        };
+        let results: Vec<Result<Vec<Vec<LatentPoint>>, GraphServiceError>> =
+            std::thread::scope(|scope| {
+                let (first, rest) = match groups.split_first() {
+                    Some((first, rest)) => (*first, rest),
+                    None => (&batches[..0], &[][..]),
+                };
+                let handles: Vec<_> = rest
+                    .iter()
+                    .map(|group| scope.spawn(move || map_group(group)))
+                    .collect();
+                let mut results = vec![map_group(first)];
+                results.extend(handles.into_iter().map(|handle| {
+                    handle.join().unwrap_or_else(|_| {
+                        Err(GraphServiceError::Internal(
+                            "a φ mapping thread panicked".to_owned(),
+                        ))
+                    })
+                }));
+                results
+            });
+        let mut all = Vec::with_capacity(batches.len());
+        for result in results {
+            all.extend(result?);
+        }
+        Ok(all)
     }
 }
 
-/// The first two coordinates of a latent row (`encoder.out_dim` is 2, checked at start-up).
-fn to_point(row: &[f32]) -> LatentPoint {
-    [
-        row.first().copied().unwrap_or(f32::NAN),
-        row.get(1).copied().unwrap_or(f32::NAN),
-    ]
+/// `batches` cut into at most `n_groups` contiguous groups of about equal floats; groups
+/// smaller than `min_floats` are not worth a thread, so fewer groups are made for small inputs.
+fn split_evenly<'a, 'b>(
+    batches: &'b [&'a [f32]],
+    n_groups: usize,
+    min_floats: usize,
+) -> Vec<&'b [&'a [f32]]> {
+    let total: usize = batches.iter().map(|b| b.len()).sum();
+    let n_groups = n_groups.min(total / min_floats.max(1)).max(1);
+    let mut groups = Vec::with_capacity(n_groups);
+    let (mut start, mut seen) = (0, 0);
+    for (i, batch) in batches.iter().enumerate() {
+        seen += batch.len();
+        // Close group g once the running total reaches (g + 1) / n_groups of the whole.
+        if groups.len() + 1 < n_groups && seen * n_groups >= (groups.len() + 1) * total {
+            groups.push(&batches[start..=i]);
+            start = i + 1;
+        }
+    }
+    groups.push(&batches[start..]);
+    groups
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::Tensor;
+    use protocol::Config;
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+
+    use super::*;
+    use crate::bench::random_phi;
+
+    fn random_obs(rows: usize, dim: usize, seed: u64) -> Vec<f32> {
+        let mut rng = Pcg64::seed_from_u64(seed);
+        (0..rows * dim)
+            .map(|_| rng.random_range(-5.0..5.0))
+            .collect()
+    }
+
+    /// The previous map: candle's encoder on 4096-row batches.
+    fn candle_map(phi: &Phi, obs: &[f32]) -> Vec<LatentPoint> {
+        let dim = phi.encoder().obs_dim();
+        obs.chunks(4096 * dim)
+            .flat_map(|batch| {
+                let input =
+                    Tensor::from_slice(batch, (batch.len() / dim, dim), &Device::Cpu).unwrap();
+                let rows = phi
+                    .encoder()
+                    .forward(&input)
+                    .unwrap()
+                    .to_vec2::<f32>()
+                    .unwrap();
+                rows.into_iter().map(|r| [r[0], r[1]])
+            })
+            .collect()
+    }
+
+    fn bits(points: &[LatentPoint]) -> Vec<[u32; 2]> {
+        points
+            .iter()
+            .map(|p| [p[0].to_bits(), p[1].to_bits()])
+            .collect()
+    }
+
+    #[test]
+    fn the_map_gives_the_candle_encoders_bits_for_the_default_network() {
+        let phi = random_phi(&Config::default(), 29, 7).unwrap();
+        let obs = random_obs(5_000, 29, 8);
+        assert_eq!(bits(&phi.map(&obs).unwrap()), bits(&candle_map(&phi, &obs)));
+    }
+
+    #[test]
+    fn the_threaded_map_is_bit_identical_to_the_single_threaded_one() {
+        let phi = random_phi(&Config::default(), 29, 9).unwrap();
+        let mut rng = Pcg64::seed_from_u64(10);
+        // Uneven batch sizes, empty ones included, enough rows for several threads.
+        let sizes: Vec<usize> = (0..60)
+            .map(|i| {
+                if i % 7 == 0 {
+                    0
+                } else {
+                    rng.random_range(1..2_000)
+                }
+            })
+            .collect();
+        let owned: Vec<Vec<f32>> = sizes
+            .iter()
+            .enumerate()
+            .map(|(i, &n)| random_obs(n, 29, 100 + i as u64))
+            .collect();
+        let batches: Vec<&[f32]> = owned.iter().map(Vec::as_slice).collect();
+        let single: Vec<Vec<[u32; 2]>> =
+            batches.iter().map(|b| bits(&phi.map(b).unwrap())).collect();
+        for n_threads in [1, 2, 3, 8] {
+            let threaded = phi.map_all(&batches, n_threads).unwrap();
+            let threaded: Vec<Vec<[u32; 2]>> = threaded.iter().map(|p| bits(p)).collect();
+            assert_eq!(threaded, single, "{n_threads} threads");
+        }
+        assert_eq!(phi.map_all(&[], 4).unwrap(), Vec::<Vec<LatentPoint>>::new());
+    }
+
+    #[test]
+    fn a_ragged_batch_is_an_error_from_any_thread() {
+        let phi = random_phi(&Config::default(), 29, 11).unwrap();
+        let good = random_obs(MIN_ROWS_PER_THREAD * 2, 29, 12);
+        let bad = vec![0.0; 30];
+        let err = phi.map_all(&[&good, &good, &bad], 3).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                GraphServiceError::ObsLength {
+                    len: 30,
+                    obs_dim: 29
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn batches_split_into_contiguous_groups_of_about_equal_size() {
+        let data = vec![0.0f32; 100];
+        let batches: Vec<&[f32]> = (0..10).map(|_| &data[..10]).collect();
+        let groups = split_evenly(&batches, 3, 1);
+        assert_eq!(
+            groups.iter().map(|g| g.len()).collect::<Vec<_>>(),
+            [4, 3, 3]
+        );
+        assert_eq!(
+            split_evenly(&batches, 3, 60).len(),
+            1,
+            "100 floats make one group of ≥ 60"
+        );
+        assert_eq!(split_evenly(&batches, 1, 1).len(), 1);
+        assert_eq!(split_evenly(&[], 4, 1), vec![&[] as &[&[f32]]]);
+    }
 }

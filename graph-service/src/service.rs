@@ -90,6 +90,8 @@ pub struct GraphService {
     pub(crate) grid: Grid,
     max_nodes: usize,
     edge_window: u32,
+    /// `graph.remap_threads`.
+    remap_threads: usize,
     pub(crate) frontier_fraction: f64,
     loader: PhiLoader,
     phi: Option<Phi>,
@@ -133,6 +135,7 @@ impl GraphService {
             grid,
             max_nodes: graph.max_nodes,
             edge_window: graph.edge_window,
+            remap_threads: graph.remap_threads,
             frontier_fraction: config.asi.frontier_fraction,
             loader: PhiLoader::new(spec, seed)?,
             phi: None,
@@ -252,7 +255,7 @@ impl GraphService {
             return Ok(());
         }
         let phi = self.loader.load(header, bytes)?;
-        let latents = remap(&phi, &self.store)?;
+        let latents = remap(&phi, &self.store, self.remap_threads)?;
         if !self.store.replace_latents(latents) {
             return Err(GraphServiceError::Internal(
                 "re-mapped latents do not match the stored trajectories".to_owned(),
@@ -376,18 +379,24 @@ fn point(values: &[f32]) -> LatentPoint {
     [values[0], values[1]]
 }
 
-/// Every stored state mapped through `phi`, per trajectory; refuses non-finite outputs.
-fn remap(phi: &Phi, store: &TrajectoryStore) -> Result<Vec<Vec<LatentPoint>>, GraphServiceError> {
-    let mut all = Vec::with_capacity(store.n_trajectories());
-    for trajectory in store.trajectories() {
-        let latents = phi.map(trajectory.obs())?;
-        if let Some(bad) = latents.iter().find(|p| !p.iter().all(|v| v.is_finite())) {
-            return Err(GraphServiceError::NonFiniteLatent {
-                phi_version: phi.version().0,
-                point: *bad,
-            });
-        }
-        all.push(latents);
+/// Every stored state mapped through `phi` on `n_threads` threads, per trajectory; refuses
+/// non-finite outputs.
+pub fn remap(
+    phi: &Phi,
+    store: &TrajectoryStore,
+    n_threads: usize,
+) -> Result<Vec<Vec<LatentPoint>>, GraphServiceError> {
+    let batches: Vec<&[f32]> = store.trajectories().map(|t| t.obs()).collect();
+    let all = phi.map_all(&batches, n_threads)?;
+    if let Some(bad) = all
+        .iter()
+        .flatten()
+        .find(|p| !p.iter().all(|v| v.is_finite()))
+    {
+        return Err(GraphServiceError::NonFiniteLatent {
+            phi_version: phi.version().0,
+            point: *bad,
+        });
     }
     Ok(all)
 }

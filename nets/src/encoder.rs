@@ -45,4 +45,9 @@ impl Encoder {
     pub fn latent_dim(&self) -> usize {
         self.mlp.out_dim()
     }
+
+    /// The underlying MLP (its layers' weights, e.g. for a fused inference copy).
+    pub fn mlp(&self) -> &Mlp {
+        &self.mlp
+    }
 }

@@ -253,6 +253,11 @@ pub struct GraphConfig {
     /// Trajectory store cap of the graph-service; oldest episodes are evicted beyond it
     /// (the code never evicts). Default 8 000 000. Unit: env steps. Source: ours.
     pub max_stored_steps: u64,
+    /// Threads that re-map the trajectory store through a new φ (the rest of the rebuild and
+    /// the mapping of arriving chunks stay on one thread). Default 2: the graph-service is
+    /// otherwise idle during a rebuild, and the dev machine has 2 cores. In [1, 256]. Unit:
+    /// threads. Source: ours.
+    pub remap_threads: usize,
 }
 
 impl Default for GraphConfig {
@@ -263,6 +268,7 @@ impl Default for GraphConfig {
             edge_window: 1,
             node_position: NodePosition::Corner,
             max_stored_steps: 8_000_000,
+            remap_threads: 2,
         }
     }
 }
@@ -279,6 +285,13 @@ impl GraphConfig {
         }
         c.at_least_one("graph.edge_window", u64::from(self.edge_window));
         c.at_least_one("graph.max_stored_steps", self.max_stored_steps);
+        if !(1..=256).contains(&self.remap_threads) {
+            c.issue(
+                "graph.remap_threads",
+                self.remap_threads,
+                "must be in [1, 256]",
+            );
+        }
     }
 }
 
