@@ -1,15 +1,20 @@
-//! Single-source shortest paths on the latent graph: Dijkstra with a binary heap and
-//! predecessor tracking, `O((V + E) log V)` per source.
+//! Single-source shortest paths on the latent graph: Dijkstra with Dial's bucket queue and
+//! predecessor tracking, `O(V + E + D)` per source (D the largest distance reached).
 //!
-//! Edge weights are integer temporal distances (env steps), so distances are exact `u64` sums
-//! and ties are broken deterministically (smaller distance, then smaller node id). The
+//! Edge weights are integer temporal distances (env steps), so distances are exact `u64` sums,
+//! a bucket per distance replaces the binary heap, and ties are broken deterministically (the
+//! bucket order: last queued first). The
 //! released code runs an `O(V²)` Dijkstra from every node; distances are the same, route
 //! tie-breaking may differ (digest §6).
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::collections::VecDeque;
 
 use crate::graph::{Adjacency, NodeId};
+
+/// Distance of an unreached node.
+const UNREACHED: u64 = u64::MAX;
+/// Predecessor of the source and of unreached nodes.
+const NO_PRED: NodeId = NodeId::MAX;
 
 /// Distances and predecessors from one source node.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -19,9 +24,88 @@ pub struct ShortestPaths {
     pred: Vec<Option<NodeId>>,
 }
 
+/// Dial's bucket queue: bucket `i` holds the nodes queued at distance `base + i`. Edge
+/// weights are integers, so a pop is a bucket pop and a push a bucket push — O(1) each, against
+/// O(log n) for a binary heap. A node is queued again only at a strictly smaller distance;
+/// entries whose distance is no longer the node's are skipped when popped. The ring of
+/// buckets never holds more than `max weight + 1` buckets (rotated, so their allocations are
+/// reused).
+struct Buckets {
+    base: u64,
+    ring: VecDeque<Vec<NodeId>>,
+    queued: usize,
+}
+
+impl Buckets {
+    fn new(source: NodeId) -> Self {
+        Self {
+            base: 0,
+            ring: VecDeque::from([vec![source]]),
+            queued: 1,
+        }
+    }
+
+    fn push(&mut self, node: NodeId, distance: u64) {
+        // Invariant: distance ≥ base (weights are non-negative, pushes come from the node at
+        // `base`), so the offset is at most the largest edge weight.
+        let offset = (distance - self.base) as usize;
+        while self.ring.len() <= offset {
+            self.ring.push_back(Vec::new());
+        }
+        self.ring[offset].push(node);
+        self.queued += 1;
+    }
+
+    /// The next queued node with its bucket's distance (smallest distance first; last in,
+    /// first out within a bucket).
+    fn pop(&mut self) -> Option<(NodeId, u64)> {
+        if self.queued == 0 {
+            return None;
+        }
+        loop {
+            if let Some(node) = self.ring.front_mut().and_then(Vec::pop) {
+                self.queued -= 1;
+                return Some((node, self.base));
+            }
+            let empty = self.ring.pop_front().unwrap_or_default();
+            self.ring.push_back(empty);
+            self.base += 1;
+        }
+    }
+}
+
+/// The settle loop shared by [`shortest_path_to`] and [`shortest_paths`]: settles nodes in
+/// the bucket order until `stop` returns true for a settled node or nothing is queued.
+fn settle(
+    adjacency: &Adjacency,
+    source: NodeId,
+    dist: &mut [u64],
+    pred: &mut [NodeId],
+    mut stop: impl FnMut(NodeId) -> bool,
+) {
+    dist[source as usize] = 0;
+    let mut queue = Buckets::new(source);
+    while let Some((u, d)) = queue.pop() {
+        if dist[u as usize] != d {
+            continue; // a stale entry: u was queued again at a smaller distance
+        }
+        if stop(u) {
+            return;
+        }
+        for &(v, w) in &adjacency[u as usize] {
+            let candidate = d + u64::from(w);
+            if candidate < dist[v as usize] {
+                dist[v as usize] = candidate;
+                pred[v as usize] = u;
+                queue.push(v, candidate);
+            }
+        }
+    }
+}
+
 /// The shortest path from `source` to `target` (both included), or `None` if unreachable.
 /// Dijkstra stopped as soon as `target` is settled: the path is exactly the one
-/// [`shortest_paths`] recovers (same heap order; a settled node's predecessor never changes),
+/// [`shortest_paths`] recovers (same queue order; a settled node's predecessor never changes),
 /// at a fraction of the cost for nearby targets (SI route batches, `asi graph route`).
 pub fn shortest_path_to(
     adjacency: &Adjacency,
@@ -32,64 +116,48 @@ pub fn shortest_path_to(
     if (source as usize) >= n || (target as usize) >= n {
         return None;
     }
-    let mut dist: Vec<Option<u64>> = vec![None; n];
-    let mut pred: Vec<Option<NodeId>> = vec![None; n];
-    dist[source as usize] = Some(0);
-    let mut heap = BinaryHeap::from([Reverse((0u64, source))]);
-    while let Some(Reverse((d, u))) = heap.pop() {
-        if dist[u as usize] != Some(d) {
-            continue;
-        }
-        if u == target {
-            let mut path = vec![target];
-            let mut node = target;
-            while let Some(prev) = pred[node as usize] {
-                path.push(prev);
-                node = prev;
-            }
-            path.reverse();
-            return Some(path);
-        }
-        for &(v, w) in &adjacency[u as usize] {
-            let candidate = d + u64::from(w);
-            if dist[v as usize].is_none_or(|old| candidate < old) {
-                dist[v as usize] = Some(candidate);
-                pred[v as usize] = Some(u);
-                heap.push(Reverse((candidate, v)));
-            }
-        }
+    let mut dist = vec![UNREACHED; n];
+    let mut pred = vec![NO_PRED; n];
+    let mut found = false;
+    settle(adjacency, source, &mut dist, &mut pred, |u| {
+        found = u == target;
+        found
+    });
+    found.then(|| walk_back(&pred, target))
+}
+
+/// Nodes from the source to `target` by predecessors (`target` reached).
+fn walk_back(pred: &[NodeId], target: NodeId) -> Vec<NodeId> {
+    let mut path = vec![target];
+    let mut node = target;
+    while pred[node as usize] != NO_PRED {
+        node = pred[node as usize];
+        path.push(node);
     }
-    None
+    path.reverse();
+    path
 }
 
 /// Dijkstra from `source` over `adjacency` (`adjacency[u]` = `(v, weight)` pairs). A source
 /// outside the graph gives a result in which nothing is reachable.
 pub fn shortest_paths(adjacency: &Adjacency, source: NodeId) -> ShortestPaths {
     let n = adjacency.len();
-    let mut paths = ShortestPaths {
+    let mut dist = vec![UNREACHED; n];
+    let mut pred = vec![NO_PRED; n];
+    if (source as usize) < n {
+        settle(adjacency, source, &mut dist, &mut pred, |_| false);
+    }
+    ShortestPaths {
         source,
-        dist: vec![None; n],
-        pred: vec![None; n],
-    };
-    if (source as usize) >= n {
-        return paths;
+        dist: dist
+            .into_iter()
+            .map(|d| (d != UNREACHED).then_some(d))
+            .collect(),
+        pred: pred
+            .into_iter()
+            .map(|p| (p != NO_PRED).then_some(p))
+            .collect(),
     }
-    paths.dist[source as usize] = Some(0);
-    let mut heap = BinaryHeap::from([Reverse((0u64, source))]);
-    while let Some(Reverse((d, u))) = heap.pop() {
-        if paths.dist[u as usize] != Some(d) {
-            continue; // a stale entry: u was settled with a smaller distance
-        }
-        for &(v, w) in &adjacency[u as usize] {
-            let candidate = d + u64::from(w);
-            if paths.dist[v as usize].is_none_or(|old| candidate < old) {
-                paths.dist[v as usize] = Some(candidate);
-                paths.pred[v as usize] = Some(u);
-                heap.push(Reverse((candidate, v)));
-            }
-        }
-    }
-    paths
 }
 
 impl ShortestPaths {
