@@ -31,6 +31,7 @@ struct ScriptedOracle {
     answer_least_visited: bool,
     frontier_asked: Vec<LatentPoint>,
     candidates_asked: Vec<Vec<LatentPoint>>,
+    reported: Vec<ReachSample>,
 }
 
 impl ScriptedOracle {
@@ -40,6 +41,7 @@ impl ScriptedOracle {
             answer_least_visited: true,
             frontier_asked: Vec::new(),
             candidates_asked: Vec::new(),
+            reported: Vec::new(),
         }
     }
 }
@@ -63,9 +65,10 @@ impl GraphOracle for ScriptedOracle {
 
     fn report_reaching(
         &mut self,
-        _samples: &[ReachSample],
+        samples: &[ReachSample],
         _phi_version: PhiVersion,
     ) -> Result<bool, ActorError> {
+        self.reported.extend_from_slice(samples);
         Ok(true)
     }
 
@@ -476,6 +479,19 @@ fn an_fr_episode_follows_the_route_with_waypoints_k_nodes_ahead_and_a_far_goal()
             "stored action = subgoal − φ(s_t), unclipped"
         );
     }
+    // Every FR segment but the last reports ‖subgoal − φ(s_{t+c})‖ at its subgoal (digest §5.3).
+    let expected: Vec<ReachSample> = decided
+        .windows(2)
+        .map(|w| ReachSample {
+            subgoal: [w[0].subgoal[0], w[0].subgoal[1]],
+            error: dist(&w[0].subgoal, &w[1].phi),
+        })
+        .collect();
+    assert_eq!(oracle.reported.len(), 9);
+    for (got, want) in oracle.reported.iter().zip(&expected) {
+        assert_eq!(got.subgoal, want.subgoal);
+        assert!((got.error - want.error).abs() < 1e-5, "{got:?} vs {want:?}");
+    }
     ks.sort_unstable();
     ks.dedup();
     assert!(ks.len() > 1, "k is drawn per decision: {ks:?}");
@@ -693,4 +709,23 @@ fn the_service_oracle_takes_only_in_range_finite_least_visited_answers() {
         let answer = oracle.least_visited(&candidates, PhiVersion(2)).unwrap();
         assert_eq!(answer, None, "index {index}, visits {visits}");
     }
+}
+
+#[test]
+fn fr_episodes_replay_exactly_for_a_seed() {
+    let run = || {
+        let mut actor = actor(&config(), 13, 0.5);
+        let mut oracle = ScriptedOracle::new(straight_route);
+        let chunks: Vec<Vec<f32>> = (0..4)
+            .flat_map(|_| episode(&mut actor, &mut oracle))
+            .map(|c| c.records)
+            .collect();
+        (chunks, actor.stats().frontier)
+    };
+    let (first, stats) = run();
+    assert!(
+        stats.n_episodes > 0,
+        "fr_prob 0.5 over 4 episodes drew FR: {stats:?}"
+    );
+    assert_eq!(run(), (first, stats));
 }
