@@ -149,16 +149,16 @@ pub fn nearest_route_index(route: &[LatentPoint], at: &[f32]) -> Option<usize> {
         .map(|(i, _)| i)
 }
 
-/// The waypoint k route points past the point nearest to `at`, clamped to the last node; the
-/// frontier itself when the route is empty.
+/// Index of the waypoint: k route points past the point nearest to `at`, clamped to the last
+/// node; `None` for an empty route.
+pub fn waypoint_index(route: &[LatentPoint], at: &[f32], k: u32) -> Option<usize> {
+    let nearest = nearest_route_index(route, at)?;
+    Some(nearest.saturating_add(k as usize).min(route.len() - 1))
+}
+
+/// The waypoint ([`waypoint_index`]); the frontier itself when the route is empty.
 pub fn waypoint(route: &[LatentPoint], frontier: LatentPoint, at: &[f32], k: u32) -> LatentPoint {
-    match nearest_route_index(route, at) {
-        Some(nearest) => {
-            let index = nearest.saturating_add(k as usize).min(route.len() - 1);
-            route[index]
-        }
-        None => frontier,
-    }
+    waypoint_index(route, at, k).map_or(frontier, |index| route[index])
 }
 
 /// `n` candidates uniform in the ±`abs_range` box around `at` (x then y per candidate).
@@ -310,9 +310,8 @@ impl FrontierEpisode {
             count_mode_subgoal(at, params, phi_version, rng, oracle)?
         } else {
             let k = rng.random_range(params.k_range[0]..=params.k_range[1]);
-            let index = nearest_route_index(&self.route, &at)
-                .map(|i| i.saturating_add(k as usize).min(self.route.len() - 1));
-            let subgoal = waypoint(&self.route, self.frontier, &at, k);
+            let index = waypoint_index(&self.route, &at, k);
+            let subgoal = index.map_or(self.frontier, |i| self.route[i]);
             (subgoal, FrChoice::Waypoint { k, index })
         };
         self.prev2 = self.prev;
