@@ -4,7 +4,7 @@
 //! - [`actor`]: [`Actor`], the transport-agnostic state machine (`next_chunk`, `load_weights`,
 //!   `stats`), [`ActorStats`].
 //! - [`chunk`]: [`Chunk`] and the buffer chunks are cut from.
-//! - [`episode`]: one episode's stepping: high-level decisions every c steps, low-level actions,
+//! - `episode`: one episode's stepping: high-level decisions every c steps, low-level actions,
 //!   φ labels, records.
 //! - [`subgoal`]: [`SubgoalSource`], how the high level decides (random warm-up, policy, HESS
 //!   exploration through the graph-service).
@@ -13,9 +13,9 @@
 //! - [`oracle`]: [`GraphOracle`], the graph-service questions of an acting actor, with
 //!   [`NoGraph`] and [`ServiceOracle`] (the protocol over any [`GraphTransport`]).
 //! - [`eval`]: [`eval::Evaluator`], deterministic evaluation episodes on the test goal.
-//! - [`exploration`]: sampling and noise for both levels, clipping.
-//! - [`networks`]: φ, π_hi, π_lo inference with double-buffered weights.
-//! - [`record`]: writing records into the `[f32]` payload.
+//! - `exploration`: sampling and noise for both levels, clipping.
+//! - `networks`: φ, π_hi, π_lo inference with double-buffered weights.
+//! - `record`: writing records into the `[f32]` payload.
 //! - [`seeds`]: episode ids and per-episode env seeds.
 //!
 //! Invariants: no I/O and no threads here (the `asi` binary wires transport); every random

@@ -10,7 +10,7 @@
 //!   reaches about 25 in norm after the outward push), and clipping would make the stored action
 //!   disagree with the subgoal the low level actually chased.
 //!
-//! An episode's [`SubgoalPlan`] fixes its base source (random for the actor's first
+//! An episode's `SubgoalPlan` fixes its base source (random for the actor's first
 //! `learner.high.random_episodes` episodes, the policy afterwards) and, once the run-wide
 //! training episode count exceeds `exploration.explore_start_episode`, an [`ExploreGate`]: at
 //! each decision, with probability `count_prob`, the explore subgoal is asked for; when the
