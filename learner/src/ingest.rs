@@ -23,6 +23,10 @@
 //! [`ChunkOutcome::far_goal_success`] reports both at the episode's end (see
 //! [`crate::schedule`]).
 //!
+//! SI buffer ([`crate::si::buffer`]): when SI is on, every stored step also adds an entry
+//! `(s_0, s_t = obs, g = goal)`; the episode's s_0 is the obs of the first step the learner
+//! stored for it (the true s_0 unless chunk 0 was lost), registered once per episode.
+//!
 //! Memory bound: at most [`MAX_OPEN_EPISODES`] open episodes (a killed actor never sends its
 //! last chunk); beyond that the least recently touched one is abandoned and counted. Finished
 //! episodes are remembered ([`MAX_FINISHED_EPISODES`], oldest forgotten first) to recognise
@@ -35,6 +39,7 @@ use protocol::{ActorId, EpisodeId, StepView, TrajectoryFlags, TrajectoryHeader};
 use crate::error::LearnerError;
 use crate::phi::store::{PhiStore, RunBuilder};
 use crate::replay::{HighReplay, HighTransition, LowReplay, LowTransition};
+use crate::si::{EpisodeRef, SiBuffer};
 
 /// Most episodes kept open at once (ours: far above actors × envs per actor).
 pub const MAX_OPEN_EPISODES: usize = 4096;
@@ -104,6 +109,8 @@ struct OpenEpisode {
     far_goal: bool,
     /// Some step reported success.
     success: bool,
+    /// The episode's handle in the SI buffer, once its first step was stored there.
+    si_episode: Option<EpisodeRef>,
 }
 
 /// What one stored chunk produced.
@@ -128,6 +135,8 @@ pub struct Buffers<'a> {
     pub high: &'a mut HighReplay,
     /// φ observation store (an episode's states when it ends).
     pub phi: &'a mut PhiStore,
+    /// SI buffer (every step), `None` when SI is off.
+    pub si: Option<&'a mut SiBuffer>,
 }
 
 /// Per-episode continuity and open segments.
@@ -177,7 +186,12 @@ impl Episodes {
         steps: &[StepView],
         buffers: Buffers<'_>,
     ) -> ChunkOutcome {
-        let Buffers { low, high, phi } = buffers;
+        let Buffers {
+            low,
+            high,
+            phi,
+            mut si,
+        } = buffers;
         self.clock += 1;
         let key = (header.actor_id, header.episode_id);
         let entry = self.open.entry(key).or_default();
@@ -196,6 +210,9 @@ impl Episodes {
             outcome.high_added += advance_segment(&mut entry.segment, step, high);
             entry.states.push_step(step.obs, step.next_obs);
             entry.success |= step.success;
+            if let Some(si) = si.as_deref_mut() {
+                push_si(si, &mut entry.si_episode, step);
+            }
         }
         if header.flags.contains(TrajectoryFlags::EPISODE_END) {
             outcome.high_added += close_at_end(&mut entry.segment, steps, high);
@@ -257,6 +274,17 @@ fn duplicate(header: &TrajectoryHeader, expected: u32) -> LearnerError {
         episode: header.episode_id,
         chunk_index: header.chunk_index,
         expected,
+    }
+}
+
+/// Adds `step` to the SI buffer, registering the episode's start at its first stored step.
+/// Refused steps are counted by the buffer itself.
+fn push_si(si: &mut SiBuffer, episode: &mut Option<EpisodeRef>, step: &StepView) {
+    if episode.is_none() {
+        *episode = si.begin_episode(step.obs);
+    }
+    if let Some(id) = *episode {
+        si.push(id, step.obs, step.goal);
     }
 }
 

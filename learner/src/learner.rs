@@ -26,6 +26,12 @@
 //! round, and what a round sees does not depend on actor speed (the φ store is frozen).
 //! Low-level rewards keep the φ labels computed at collection time (SPEC §6.1, digest §3.2:
 //! the code never relabels them): the low replay is not touched by a round.
+//!
+//! Self-imitation ([`crate::si`]): every training episode that ends after
+//! `asi.si_start_episode` makes one SI round due (counted at ingest); the binary runs due rounds
+//! with [`Learner::train_self_imitation`], handing it a [`RouteSource`] — the learner itself
+//! never talks to the graph-service. Rounds wait while a φ round runs, and ask for routes in the
+//! learner's current φ version.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -50,6 +56,9 @@ use crate::replay::{sample_into, BatchStage, HighReplay, LowReplay, LowRewardSpe
 use crate::sac::{SacBatch, SacLevel, SacStats};
 use crate::schedule::ScheduleTracker;
 use crate::setup::{build_networks, deterministic_unsupported, Networks};
+
+pub mod checkpoint;
+use crate::si::{RouteSource, SelfImitation, SiParams, SiStats};
 
 /// Offset of the sampling RNG seed from the run seed (ours; keeps it apart from the init).
 const SAMPLING_SEED_OFFSET: u64 = 0x5a3b_1e00;
@@ -147,6 +156,7 @@ pub struct Learner {
     phi_store: PhiStore,
     phi: PhiTrainer,
     schedule: ScheduleTracker,
+    si: SelfImitation,
 }
 
 impl Learner {
@@ -225,6 +235,7 @@ impl Learner {
             phi_store,
             phi,
             schedule: ScheduleTracker::new(config),
+            si: SelfImitation::new(SiParams::from_config(config), spec.obs_dim, spec.goal_dim),
             spec,
             nets,
         })
@@ -252,6 +263,7 @@ impl Learner {
             low: &mut self.low_replay,
             high: &mut self.high_replay,
             phi: &mut self.phi_store,
+            si: self.si.buffer_for_ingest(),
         };
         let outcome = self.episodes.store(header, continuity, &steps, buffers);
         self.count_stored(header, steps.len() as u64, &outcome);
@@ -302,6 +314,7 @@ impl Learner {
         s.abandoned_episodes = self.episodes.n_abandoned();
         if outcome.episode_ended {
             self.schedule.on_episode_end(outcome.far_goal_success);
+            self.si.on_episode_end(self.schedule.train_episodes());
         }
         let lag = self
             .policy_version
@@ -406,6 +419,32 @@ impl Learner {
         self.telemetry.high = self.nets.high.update(&batch, &next_eps, &eps)?;
         self.updates_high += 1;
         Ok(())
+    }
+
+    /// Runs one due self-imitation round (a high-level step, then a low-level step, each on its
+    /// own batch with routes from `routes`; see [`crate::si::step`]) and returns the Adam steps
+    /// taken (0–2). Nothing runs while no round is due or a φ round is due or running (the
+    /// round stays due). Call it until it returns 0 and [`Learner::si_pending`] is 0, or once
+    /// per loop iteration.
+    pub fn train_self_imitation(
+        &mut self,
+        routes: &mut dyn RouteSource,
+    ) -> Result<usize, LearnerError> {
+        if self.si.pending() == 0 || self.phi.is_active() {
+            return Ok(0);
+        }
+        self.si
+            .run_round(&mut self.nets, &mut self.rng, routes, self.phi_version)
+    }
+
+    /// SI rounds due and not yet run.
+    pub fn si_pending(&self) -> u64 {
+        self.si.pending()
+    }
+
+    /// The self-imitation state (buffer, counters).
+    pub fn self_imitation(&self) -> &SelfImitation {
+        &self.si
     }
 
     /// Two `[batch, dim]` standard-normal tensors from the learner's generator.
@@ -541,12 +580,13 @@ impl Learner {
     }
 
     /// Scalar metrics, names as in `docs/METRICS.md` (prefixes `losses/`, `charts/`,
-    /// `replay/`, `ingest/`).
+    /// `replay/`, `ingest/`, `phi/`, `schedule/`, `si/`).
     pub fn metrics(&self) -> Vec<(&'static str, f64)> {
         let mut out = sac_metrics(&self.telemetry.low, LOW_NAMES);
         out.extend(sac_metrics(&self.telemetry.high, HIGH_NAMES));
         out.extend(self.count_metrics());
         out.extend(self.phi_metrics());
+        out.extend(si_metrics(self.si.stats(), &self.si));
         out
     }
 
@@ -624,6 +664,34 @@ impl Learner {
             ("ingest/dropped_segments", s.dropped_segments as f64),
         ]
     }
+}
+
+/// Self-imitation metrics (`si/*`, `docs/METRICS.md`).
+fn si_metrics(s: &SiStats, si: &SelfImitation) -> Vec<(&'static str, f64)> {
+    vec![
+        ("si/high_loss", s.high.loss),
+        ("si/low_loss", s.low.loss),
+        ("si/usable_fraction", s.usable_fraction),
+        ("si/low_usable_fraction", s.low_usable_fraction),
+        ("si/via_frontier_fraction", s.via_frontier_fraction),
+        ("si/steps", (s.high_steps + s.low_steps) as f64),
+        ("si/high_steps", s.high_steps as f64),
+        ("si/low_steps", s.low_steps as f64),
+        ("si/rounds_due", s.rounds_due as f64),
+        ("si/pending", si.pending() as f64),
+        ("si/skipped", s.skipped() as f64),
+        ("si/skipped_disabled", s.skipped_disabled as f64),
+        ("si/skipped_no_answer", s.skipped_no_answer as f64),
+        ("si/skipped_phi_mismatch", s.skipped_phi_mismatch as f64),
+        (
+            "si/skipped_no_usable_route",
+            s.skipped_no_usable_route as f64,
+        ),
+        ("si/skipped_empty_buffer", s.skipped_empty_buffer as f64),
+        ("si/buffer_len", si.buffer().len() as f64),
+        ("si/buffer_evicted", si.buffer().n_evicted() as f64),
+        ("si/buffer_orphaned", si.buffer().n_orphaned() as f64),
+    ]
 }
 
 /// Metric names of one level's SAC statistics.

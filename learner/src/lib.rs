@@ -12,6 +12,8 @@
 //! - [`sac`]: SAC losses (pure functions, one module for both levels) and the update.
 //! - [`phi`]: the φ observation store, the triplet and stable losses, the training rounds.
 //! - [`schedule`]: the run-wide schedule (training episodes, `count_prob`, `fr_prob`).
+//! - [`si`]: hierarchical self-imitation: the (s₀, s_t, g) buffer, route indices, the two
+//!   losses, the [`si::RouteSource`] the binary implements, and the SI steps.
 //! - [`deterministic`]: losses of the reference code's deterministic low level (not wired yet).
 //! - [`setup`]: the networks (published policy set, online and target critics).
 //! - [`learner`]: the [`Learner`] itself: ingest, train, publish, progress, metrics.
@@ -29,8 +31,10 @@ pub mod replay;
 pub mod sac;
 pub mod schedule;
 pub mod setup;
+pub mod si;
 
 pub use error::LearnerError;
 pub use learner::{IngestStats, Learner, LearnerProgress, PHI_STEPS_PER_CALL};
 pub use nets::TaskDims;
 pub use ratio::ReplayRatio;
+pub use si::{NoRouteSource, RouteSource, RoutesReply};

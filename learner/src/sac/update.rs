@@ -278,6 +278,19 @@ impl SacLevel {
         Ok((stats, log_prob.detach()))
     }
 
+    /// One Adam step of the policy optimiser on an extra policy loss (self-imitation,
+    /// [`crate::si`]); `value` is the loss as a number, checked to be finite before stepping.
+    pub fn policy_step(
+        &mut self,
+        loss: &Tensor,
+        what: &'static str,
+        value: f64,
+    ) -> Result<(), LearnerError> {
+        self.check_finite(what, value)?;
+        self.policy_opt.backward_step(loss)?;
+        Ok(())
+    }
+
     /// target ← τ·online + (1 − τ)·target.
     fn polyak(&self) -> Result<(), LearnerError> {
         let tau = self.params.tau;

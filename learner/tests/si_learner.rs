@@ -1,0 +1,260 @@
+//! Self-imitation wired into the learner: rounds fall due per training episode after
+//! `asi.si_start_episode`, each runs a high then a low Adam step on the published policies,
+//! the route queries carry φ(s_t), φ(g̃) and φ(s_0) under the learner's encoder and its φ
+//! version, and every skip is counted by reason.
+
+mod common;
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::VarBuilder;
+use learner::si::SiStats;
+use learner::{Learner, NoRouteSource, RouteSource, RoutesReply};
+use nets::{spec_from_config, PolicySet};
+use protocol::graph::{LatentPoint, RouteAnswer, RouteQuery};
+use protocol::{Config, PhiVersion};
+
+/// Answers every query with a straight route of `nodes` points from start to end (`Direct`),
+/// or reports a φ mismatch; records what it was asked.
+struct StraightRoutes {
+    nodes: usize,
+    mismatch: bool,
+    asked: Vec<(Vec<RouteQuery>, PhiVersion)>,
+}
+
+impl StraightRoutes {
+    fn new(nodes: usize) -> Self {
+        Self {
+            nodes,
+            mismatch: false,
+            asked: Vec::new(),
+        }
+    }
+}
+
+impl RouteSource for StraightRoutes {
+    fn routes(&mut self, queries: &[RouteQuery], phi_version: PhiVersion) -> RoutesReply {
+        self.asked.push((queries.to_vec(), phi_version));
+        if self.mismatch {
+            return RoutesReply::PhiMismatch {
+                graph: PhiVersion(phi_version.0 + 1),
+            };
+        }
+        let line = |q: &RouteQuery| -> Vec<LatentPoint> {
+            (0..self.nodes)
+                .map(|i| {
+                    let f = i as f32 / (self.nodes - 1).max(1) as f32;
+                    [
+                        q.start[0] + f * (q.end[0] - q.start[0]),
+                        q.start[1] + f * (q.end[1] - q.start[1]),
+                    ]
+                })
+                .collect()
+        };
+        RoutesReply::Answered(
+            queries
+                .iter()
+                .map(|q| RouteAnswer::Direct(line(q)))
+                .collect(),
+        )
+    }
+}
+
+fn config(self_imitation: bool) -> Config {
+    let mut c = common::config();
+    c.asi.self_imitation = self_imitation;
+    c.asi.si_start_episode = 2;
+    c.asi.si_batch_size = 8;
+    c.asi.si_buffer_capacity = 1000;
+    c.validate().unwrap();
+    c
+}
+
+/// A learner that has ingested `episodes` episodes of 10 steps (obs [t, ep, 0.5], goal [5, 6]).
+fn learner_after(config: &Config, episodes: u64) -> Learner {
+    let mut l = Learner::new(config, common::DIMS, 11).unwrap();
+    for ep in 0..episodes {
+        common::ingest_episode(&mut l, 0, ep, 10, 2, 5);
+    }
+    l
+}
+
+fn stats(l: &Learner) -> SiStats {
+    *l.self_imitation().stats()
+}
+
+fn policy_bytes(l: &Learner, prefix: &str) -> Vec<f32> {
+    let data = l.policy_varmap().data().lock().unwrap();
+    let mut names: Vec<_> = data
+        .keys()
+        .filter(|k| k.starts_with(prefix))
+        .cloned()
+        .collect();
+    names.sort();
+    names
+        .iter()
+        .flat_map(|n| {
+            data[n]
+                .as_tensor()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap()
+        })
+        .collect()
+}
+
+fn phi_of(l: &Learner, config: &Config, obs: [f32; 3]) -> LatentPoint {
+    let spec = spec_from_config(config, common::DIMS).unwrap();
+    let vb = VarBuilder::from_varmap(l.policy_varmap(), DType::F32, &Device::Cpu);
+    let set = PolicySet::new(&spec, &vb).unwrap();
+    let x = Tensor::from_slice(&obs, (1, 3), &Device::Cpu).unwrap();
+    let v = set
+        .encoder
+        .forward(&x)
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
+    [v[0], v[1]]
+}
+
+#[test]
+fn rounds_fall_due_after_the_start_episode_and_train_both_policies_once_each() {
+    let config = config(true);
+    let mut l = learner_after(&config, 4);
+    assert_eq!(
+        l.self_imitation().buffer().len(),
+        40,
+        "one entry per env step"
+    );
+    assert_eq!(
+        stats(&l).rounds_due,
+        2,
+        "episodes 3 and 4 end after si_start_episode = 2"
+    );
+    assert_eq!(l.si_pending(), 2);
+    let (high0, low0, enc0) = (
+        policy_bytes(&l, "high_policy"),
+        policy_bytes(&l, "low_policy"),
+        policy_bytes(&l, "encoder"),
+    );
+    let mut routes = StraightRoutes::new(6);
+    assert_eq!(
+        l.train_self_imitation(&mut routes).unwrap(),
+        2,
+        "a high and a low step"
+    );
+    assert_ne!(
+        policy_bytes(&l, "high_policy"),
+        high0,
+        "the high policy moved"
+    );
+    assert_ne!(policy_bytes(&l, "low_policy"), low0, "the low policy moved");
+    assert_eq!(policy_bytes(&l, "encoder"), enc0, "φ is not trained by SI");
+    assert_eq!(l.train_self_imitation(&mut routes).unwrap(), 2);
+    assert_eq!(
+        l.train_self_imitation(&mut routes).unwrap(),
+        0,
+        "nothing left due"
+    );
+    let s = stats(&l);
+    assert_eq!((s.high_steps, s.low_steps, s.skipped()), (2, 2, 0));
+    assert!(s.high.loss > 0.0 && s.high.loss.is_finite());
+    assert!(s.low.loss > 0.0 && s.low.loss.is_finite());
+    assert!(
+        (s.high.loss - 0.01 * s.high.mse).abs() <= 1e-6 * s.high.mse,
+        "α = 0.01"
+    );
+    assert!(
+        (s.low.loss - 0.001 * s.low.mse).abs() <= 1e-6 * s.low.mse,
+        "β = 0.001"
+    );
+    assert_eq!((s.usable_fraction, s.low_usable_fraction), (1.0, 1.0));
+    // Four requests (two rounds × two levels), each a batch of 8 in the learner's φ version.
+    assert_eq!(routes.asked.len(), 4);
+    // The queries' points are φ under the learner's encoder (taken before the round: SI leaves
+    // φ alone): every end is φ(g̃) with g̃ = [goal xy, 0.5]; every origin is some φ(s_0).
+    let end = phi_of(&l, &config, [5.0, 6.0, 0.5]);
+    let starts: Vec<LatentPoint> = (0..4)
+        .map(|ep| phi_of(&l, &config, [0.0, ep as f32, 0.5]))
+        .collect();
+    for (queries, version) in &routes.asked {
+        assert_eq!(*version, l.progress().phi_version);
+        assert_eq!(queries.len(), 8);
+        for q in queries {
+            assert!(
+                (q.end[0] - end[0]).abs() < 1e-5 && (q.end[1] - end[1]).abs() < 1e-5,
+                "{q:?}"
+            );
+            let origin = q
+                .fallback_origin
+                .expect("SI queries carry the fallback origin");
+            assert!(starts
+                .iter()
+                .any(|s| (s[0] - origin[0]).abs() < 1e-5 && (s[1] - origin[1]).abs() < 1e-5));
+        }
+    }
+}
+
+#[test]
+fn no_answer_and_a_phi_mismatch_skip_the_steps_and_count_them() {
+    let mut l = learner_after(&config(true), 4);
+    assert_eq!(l.train_self_imitation(&mut NoRouteSource).unwrap(), 0);
+    let mut stale = StraightRoutes::new(6);
+    stale.mismatch = true;
+    assert_eq!(l.train_self_imitation(&mut stale).unwrap(), 0);
+    let s = stats(&l);
+    assert_eq!(
+        (s.skipped_no_answer, s.skipped_phi_mismatch, s.skipped()),
+        (2, 2, 4)
+    );
+    assert_eq!(s.high_steps + s.low_steps, 0);
+    assert_eq!(l.si_pending(), 0, "a skipped round is not retried");
+}
+
+#[test]
+fn routes_too_short_for_the_low_level_train_only_the_high_level() {
+    let mut l = learner_after(&config(true), 3);
+    // Two nodes: usable by the high level (L > 1), not by the low level (L > 2).
+    assert_eq!(
+        l.train_self_imitation(&mut StraightRoutes::new(2)).unwrap(),
+        1
+    );
+    let s = stats(&l);
+    assert_eq!(
+        (s.high_steps, s.low_steps, s.skipped_no_usable_route),
+        (1, 0, 1)
+    );
+    assert_eq!((s.usable_fraction, s.low_usable_fraction), (1.0, 0.0));
+}
+
+#[test]
+fn with_self_imitation_off_nothing_is_stored_and_due_rounds_count_as_skipped() {
+    let mut l = learner_after(&config(false), 4);
+    assert_eq!(l.self_imitation().buffer().len(), 0);
+    assert_eq!(l.si_pending(), 0);
+    assert_eq!(
+        l.train_self_imitation(&mut StraightRoutes::new(6)).unwrap(),
+        0
+    );
+    assert_eq!(
+        stats(&l).skipped_disabled,
+        4,
+        "two rounds, two level steps each"
+    );
+}
+
+#[test]
+fn the_si_metrics_are_reported() {
+    let mut l = learner_after(&config(true), 3);
+    l.train_self_imitation(&mut StraightRoutes::new(6)).unwrap();
+    let metrics = l.metrics();
+    let get = |name: &str| metrics.iter().find(|(k, _)| *k == name).map(|(_, v)| *v);
+    assert_eq!(get("si/steps"), Some(2.0));
+    assert_eq!(get("si/buffer_len"), Some(30.0));
+    assert_eq!(get("si/skipped"), Some(0.0));
+    assert_eq!(get("si/usable_fraction"), Some(1.0));
+    assert!(get("si/high_loss").is_some_and(|v| v > 0.0));
+    assert!(get("si/low_loss").is_some_and(|v| v > 0.0));
+}
