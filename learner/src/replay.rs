@@ -79,6 +79,28 @@ impl Column {
     pub fn allocated(&self) -> usize {
         self.blocks.iter().map(|b| b.len()).sum()
     }
+    /// Floats per row.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Rows `0..n` (all written), concatenated row-major (checkpoints).
+    pub(crate) fn export_rows(&self, n: usize) -> Vec<f32> {
+        let mut out = Vec::with_capacity(n * self.width);
+        for block in &self.blocks {
+            let want = n * self.width - out.len();
+            out.extend_from_slice(&block[..want.min(block.len())]);
+        }
+        out
+    }
+
+    /// Rows `0..k` of a fresh column from `data` (`k × width` floats, `k ≤ capacity`;
+    /// checkpoints). The caller checks both bounds.
+    pub(crate) fn import_rows(&mut self, data: &[f32]) {
+        for (index, row) in data.chunks_exact(self.width.max(1)).enumerate() {
+            self.write(index, row);
+        }
+    }
 }
 
 /// Ring bookkeeping shared by the buffers: where the next row goes and how many are valid.
@@ -128,6 +150,27 @@ impl Ring {
     /// Rows ever written (including overwritten ones).
     pub fn total(&self) -> u64 {
         self.total
+    }
+    /// The slot the next row goes to.
+    pub fn next(&self) -> usize {
+        self.next
+    }
+
+    /// A ring with this bookkeeping (checkpoints), or `None` unless it is one a ring of
+    /// `capacity` can reach: `len ≤ capacity`, `next < capacity`, `total ≥ len`, and
+    /// `next = len` before the first wrap.
+    pub(crate) fn restored(capacity: usize, len: usize, next: usize, total: u64) -> Option<Ring> {
+        let ring = Ring::new(capacity);
+        let reachable = len <= ring.capacity
+            && next < ring.capacity
+            && total >= len as u64
+            && (len == ring.capacity || (next == len && total == len as u64));
+        reachable.then_some(Ring {
+            len,
+            next,
+            total,
+            ..ring
+        })
     }
 }
 
@@ -258,6 +301,37 @@ impl LowReplay {
             truncated: col(1),
             reward,
         }
+    }
+
+    /// The columns by name, in a fixed order (checkpoints).
+    pub(crate) fn columns(&self) -> [(&'static str, &Column); 8] {
+        [
+            ("obs", &self.obs),
+            ("phi", &self.phi),
+            ("action", &self.action),
+            ("subgoal", &self.subgoal),
+            ("next_obs", &self.next_obs),
+            ("next_phi", &self.next_phi),
+            ("terminated", &self.terminated),
+            ("truncated", &self.truncated),
+        ]
+    }
+
+    /// As [`LowReplay::columns`], mutable, with the ring (checkpoints).
+    pub(crate) fn parts_mut(&mut self) -> (&mut Ring, [(&'static str, &mut Column); 8]) {
+        (
+            &mut self.ring,
+            [
+                ("obs", &mut self.obs),
+                ("phi", &mut self.phi),
+                ("action", &mut self.action),
+                ("subgoal", &mut self.subgoal),
+                ("next_obs", &mut self.next_obs),
+                ("next_phi", &mut self.next_phi),
+                ("terminated", &mut self.terminated),
+                ("truncated", &mut self.truncated),
+            ],
+        )
     }
 
     /// Appends one transition (overwrites the oldest when full).
@@ -410,6 +484,37 @@ impl HighReplay {
             terminated: col(1),
             truncated: col(1),
         }
+    }
+
+    /// The columns by name, in a fixed order (checkpoints).
+    pub(crate) fn columns(&self) -> [(&'static str, &Column); 8] {
+        [
+            ("obs", &self.obs),
+            ("goal", &self.goal),
+            ("action", &self.action),
+            ("reward", &self.reward),
+            ("next_obs", &self.next_obs),
+            ("mask", &self.mask),
+            ("terminated", &self.terminated),
+            ("truncated", &self.truncated),
+        ]
+    }
+
+    /// As [`HighReplay::columns`], mutable, with the ring (checkpoints).
+    pub(crate) fn parts_mut(&mut self) -> (&mut Ring, [(&'static str, &mut Column); 8]) {
+        (
+            &mut self.ring,
+            [
+                ("obs", &mut self.obs),
+                ("goal", &mut self.goal),
+                ("action", &mut self.action),
+                ("reward", &mut self.reward),
+                ("next_obs", &mut self.next_obs),
+                ("mask", &mut self.mask),
+                ("terminated", &mut self.terminated),
+                ("truncated", &mut self.truncated),
+            ],
+        )
     }
 
     /// Appends one transition (overwrites the oldest when full).

@@ -76,6 +76,19 @@ impl ScheduleTracker {
         }
     }
 
+    /// The state that changes with episodes: `(train_episodes, window_successes, count_prob)`
+    /// (checkpoints).
+    pub(crate) fn counters(&self) -> (u64, u64, f64) {
+        (self.train_episodes, self.window_successes, self.count_prob)
+    }
+
+    /// Sets the state saved by [`ScheduleTracker::counters`] (checkpoints).
+    pub(crate) fn restore_counters(&mut self, (train, window, count_prob): (u64, u64, f64)) {
+        self.train_episodes = train;
+        self.window_successes = window;
+        self.count_prob = count_prob;
+    }
+
     /// The schedule to broadcast now.
     pub fn current(&self) -> RunSchedule {
         RunSchedule {

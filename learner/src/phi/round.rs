@@ -243,6 +243,22 @@ impl PhiTrainer {
         self.active.is_some()
     }
 
+    /// The state a checkpoint carries between rounds: the optimiser, the sampling generator,
+    /// the next round index and the statistics.
+    pub(crate) fn checkpoint_parts(&self) -> (&Adam, &Pcg64Mcg, u64, PhiStats) {
+        (&self.opt, &self.rng, self.next_round, self.stats)
+    }
+
+    /// The optimiser, generator, next round and statistics, for a restore (no round runs).
+    pub(crate) fn restore_parts(&mut self) -> (&mut Adam, &mut Pcg64Mcg, &mut u64, &mut PhiStats) {
+        (
+            &mut self.opt,
+            &mut self.rng,
+            &mut self.next_round,
+            &mut self.stats,
+        )
+    }
+
     /// Index of the next round to start (= rounds started so far).
     pub fn next_round(&self) -> u64 {
         self.next_round

@@ -163,6 +163,52 @@ impl PhiStore {
         self.frozen
     }
 
+    /// The stored runs, oldest first, as `(obs, priority)` (checkpoints; staged runs are not
+    /// included: a checkpoint is never taken while a round holds the store).
+    pub(crate) fn runs(&self) -> impl Iterator<Item = (&[f32], &[f32])> {
+        self.runs
+            .iter()
+            .map(|r| (r.obs.as_slice(), r.priority.as_slice()))
+    }
+
+    /// Replaces the contents of an empty, thawed store with `runs` (oldest first, `(obs,
+    /// priority)`) and `stats` (checkpoints). Refused, with nothing changed, when a run's
+    /// lengths disagree, a run is shorter than k + 1 states, or the total exceeds the capacity.
+    pub(crate) fn restore(
+        &mut self,
+        runs: Vec<(Vec<f32>, Vec<f32>)>,
+        stats: StoreStats,
+    ) -> Result<(), String> {
+        let mut total = 0usize;
+        for (index, (obs, priority)) in runs.iter().enumerate() {
+            let n = priority.len();
+            if obs.len() != n * self.obs_dim || n <= self.negative_offset {
+                return Err(format!(
+                    "run {index}: {} observation floats and {n} priorities (obs_dim {}, k {})",
+                    obs.len(),
+                    self.obs_dim,
+                    self.negative_offset
+                ));
+            }
+            total += n;
+        }
+        if total > self.capacity_states {
+            return Err(format!(
+                "{total} states for a capacity of {}",
+                self.capacity_states
+            ));
+        }
+        self.runs = runs
+            .into_iter()
+            .map(|(obs, priority)| StateRun { obs, priority })
+            .collect();
+        self.n_states = total;
+        self.staged.clear();
+        self.frozen = false;
+        self.stats = stats;
+        Ok(())
+    }
+
     /// Every anchor position `(run, t)` with `t + k` inside its run, oldest run first.
     pub fn candidates(&self) -> Vec<Candidate> {
         let k = self.negative_offset;

@@ -1,0 +1,948 @@
+//! Learner checkpoints: everything a [`Learner`] needs to continue as if uninterrupted —
+//! network weights, Adam states, counters, the run schedule, generator states, both replay
+//! buffers and the φ store — written to `checkpoints/ckpt-NNNNNN/` under the run folder.
+//!
+//! Layout of one checkpoint folder (each file is one entry of [`PARTS`]):
+//!
+//! | file | contents |
+//! |---|---|
+//! | `policy.safetensors` | published parameters (encoder, high and low policies) |
+//! | `critic.safetensors`, `target.safetensors` | online and target critics |
+//! | `optim.safetensors` | Adam m and v of every optimiser, log α; step counts in metadata |
+//! | `replay_low.safetensors`, `replay_high.safetensors` | buffer columns, rows `0..len`; ring in metadata |
+//! | `phi_store.safetensors` | φ store runs (observations, priorities); run lengths and stats in metadata |
+//! | `state.json` | counters, publication bookkeeping, schedule, generators, φ trainer scalars |
+//! | `manifest.json` | format and protocol versions, layout hash, config fingerprint, size and checksum of each file above |
+//!
+//! Invariants:
+//! - Atomic: the files are written into `.tmp-ckpt-NNNNNN/`, synced, then the folder is renamed;
+//!   a folder named `ckpt-*` is complete. Only the newest [`KEEP`] checkpoints are kept.
+//! - All or nothing: a restore checks the manifest (versions, layout, config), then the size
+//!   and checksum of every file, then parses every file into a fresh learner; any problem is an
+//!   error naming the file, and no learner is returned.
+//! - Taken between φ rounds only ([`CheckpointError::RoundActive`]): a round's sampling state
+//!   is not saved, so the φ store is thawed and holds no staged run when one is written.
+//! - Not saved (by design): the open episodes of the ingest (a resumed run starts new
+//!   episodes; chunks of old ones are counted as lost), the last update's loss statistics and
+//!   timing telemetry (metrics only).
+//!
+//! Extension: a new piece of state adds one [`Part`] to [`PARTS`] — a file name, a function
+//! that serialises it and one that restores it into a fresh learner.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use candle_core::{Device, Tensor};
+use protocol::{Config, PhiVersion, PolicyVersion, RunSchedule, PROTOCOL_VERSION};
+use rand_pcg::Pcg64Mcg;
+use safetensors::SafeTensors;
+use serde::{Deserialize, Serialize};
+
+use super::{IngestStats, Learner, PublishState};
+use crate::adam::{Adam, AdamState};
+use crate::error::LearnerError;
+use crate::ingest::Episodes;
+use crate::phi::store::StoreStats;
+use crate::replay::{Column, Ring};
+use nets::TaskDims;
+
+/// Version of the checkpoint format; a checkpoint of another version is refused.
+pub const FORMAT_VERSION: u32 = 1;
+/// Name of the manifest inside a checkpoint folder.
+pub const MANIFEST: &str = "manifest.json";
+/// Checkpoints kept in `checkpoints/` (older ones are removed after a new one is written).
+pub const KEEP: usize = 2;
+/// Folder name prefix of a complete checkpoint (`ckpt-` + 6-digit sequence number).
+const PREFIX: &str = "ckpt-";
+/// The safetensors metadata key of our metadata (a JSON object of strings).
+const META_KEY: &str = "asi_checkpoint";
+/// Folder name prefix of a checkpoint being written.
+const TMP_PREFIX: &str = ".tmp-ckpt-";
+
+/// Why a checkpoint could not be written or restored.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    /// A file or folder could not be read or written.
+    #[error("checkpoint {}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file is missing, truncated, fails its checksum or holds something unexpected.
+    #[error("checkpoint file {} is corrupt: {problem}", path.display())]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The checkpoint was written by another format, protocol, network layout or config.
+    #[error(
+        "checkpoint {} is incompatible: its {what} is {found}, this run needs {expected}",
+        path.display()
+    )]
+    Incompatible {
+        /// The manifest.
+        path: PathBuf,
+        /// Which property differs.
+        what: &'static str,
+        /// The value this learner needs.
+        expected: String,
+        /// The checkpoint's value.
+        found: String,
+    },
+    /// A φ round is running; its sampling state is not saved (try again after the round).
+    #[error("no checkpoint while a φ round runs; retry when the round has finished")]
+    RoundActive,
+    /// Building the fresh learner failed.
+    #[error(transparent)]
+    Learner(#[from] LearnerError),
+}
+
+/// One file of a checkpoint, as listed in the manifest.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    /// File name inside the checkpoint folder.
+    pub name: String,
+    /// Size in bytes.
+    pub bytes: u64,
+    /// [`checksum`] of the contents, 16 hex digits.
+    pub checksum: String,
+}
+
+/// `manifest.json`: what a checkpoint is and how to check it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// [`FORMAT_VERSION`] of the writer.
+    pub format_version: u32,
+    /// [`PROTOCOL_VERSION`] of the writer.
+    pub protocol_version: u32,
+    /// Layout hash of the published parameters ([`Learner::weights_layout_hash`]).
+    pub layout_hash: u64,
+    /// [`config_fingerprint`] of the writer's config, 16 hex digits.
+    pub config_fingerprint: String,
+    /// Sequence number N of `ckpt-N` (1 for the first checkpoint of a run).
+    pub sequence: u64,
+    /// Env steps ingested when it was written.
+    pub env_steps: u64,
+    /// Low-level updates run when it was written.
+    pub updates_low: u64,
+    /// High-level updates run when it was written.
+    pub updates_high: u64,
+    /// Every other file of the folder.
+    pub files: Vec<FileEntry>,
+}
+
+impl Manifest {
+    /// Total size of the listed files in bytes.
+    pub fn total_bytes(&self) -> u64 {
+        self.files.iter().map(|f| f.bytes).sum()
+    }
+}
+
+/// A checkpoint on disk: its folder and manifest.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Checkpoint {
+    /// The `ckpt-N` folder.
+    pub path: PathBuf,
+    /// Its manifest.
+    pub manifest: Manifest,
+}
+
+/// 64-bit FNV-1a over the little-endian 8-byte words of `bytes` (then the remaining bytes one
+/// by one): a fast check against truncation and bit rot, not a cryptographic hash.
+pub fn checksum(bytes: &[u8]) -> u64 {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let mut hash = OFFSET;
+    let words = bytes.chunks_exact(8);
+    let tail = words.remainder();
+    for word in words {
+        let mut w = [0u8; 8];
+        w.copy_from_slice(word);
+        hash = (hash ^ u64::from_le_bytes(w)).wrapping_mul(PRIME);
+    }
+    for &b in tail {
+        hash = (hash ^ u64::from(b)).wrapping_mul(PRIME);
+    }
+    hash ^ bytes.len() as u64
+}
+
+/// Fingerprint of the config sections that shape the learner's state — `env`, `hierarchy`,
+/// `learner`, `replay`, `encoder` — as [`checksum`] of their JSON. Other sections (run
+/// length, seeds, exploration, graph, evaluation, transport) may change on resume.
+pub fn config_fingerprint(config: &Config) -> String {
+    let sections = serde_json::json!({
+        "env": config.env,
+        "hierarchy": config.hierarchy,
+        "learner": config.learner,
+        "replay": config.replay,
+        "encoder": config.encoder,
+    });
+    format!("{:016x}", checksum(sections.to_string().as_bytes()))
+}
+
+/// The newest complete checkpoint in `dir` (a run's `checkpoints/`), if any; `None` when the
+/// folder does not exist.
+pub fn latest_checkpoint(dir: &Path) -> Result<Option<PathBuf>, CheckpointError> {
+    Ok(list_checkpoints(dir)?.pop().map(|(_, path)| path))
+}
+
+/// Complete checkpoints in `dir`, oldest first, with their sequence numbers.
+fn list_checkpoints(dir: &Path) -> Result<Vec<(u64, PathBuf)>, CheckpointError> {
+    let entries = match fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(source) => return Err(io_error(dir, source)),
+    };
+    let mut out = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|source| io_error(dir, source))?;
+        let name = entry.file_name();
+        let Some(seq) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(PREFIX))
+            .and_then(|n| n.parse::<u64>().ok())
+        else {
+            continue;
+        };
+        out.push((seq, entry.path()));
+    }
+    out.sort();
+    Ok(out)
+}
+
+fn io_error(path: &Path, source: std::io::Error) -> CheckpointError {
+    CheckpointError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn corrupt(path: &Path, problem: impl Into<String>) -> CheckpointError {
+    CheckpointError::Corrupt {
+        path: path.to_path_buf(),
+        problem: problem.into(),
+    }
+}
+
+/// One piece of learner state and its file.
+struct Part {
+    /// File name inside the checkpoint folder.
+    file: &'static str,
+    /// The file's contents for this learner.
+    save: fn(&Learner) -> Result<Vec<u8>, String>,
+    /// Restores the piece into a fresh learner built from the same config; the error says
+    /// what is wrong with the contents.
+    restore: fn(&mut Learner, &[u8]) -> Result<(), String>,
+}
+
+/// Every piece of state a checkpoint carries (see the module doc).
+const PARTS: &[Part] = &[
+    Part {
+        file: "policy.safetensors",
+        save: |l| nets::to_safetensors_bytes(&l.nets.policy_vm).map_err(|e| e.to_string()),
+        restore: |l, b| {
+            nets::load_safetensors_bytes(&l.nets.policy_vm, b).map_err(|e| e.to_string())
+        },
+    },
+    Part {
+        file: "critic.safetensors",
+        save: |l| nets::to_safetensors_bytes(&l.nets.critic_vm).map_err(|e| e.to_string()),
+        restore: |l, b| {
+            nets::load_safetensors_bytes(&l.nets.critic_vm, b).map_err(|e| e.to_string())
+        },
+    },
+    Part {
+        file: "target.safetensors",
+        save: |l| nets::to_safetensors_bytes(&l.nets.target_vm).map_err(|e| e.to_string()),
+        restore: |l, b| {
+            nets::load_safetensors_bytes(&l.nets.target_vm, b).map_err(|e| e.to_string())
+        },
+    },
+    Part {
+        file: "optim.safetensors",
+        save: save_optim,
+        restore: restore_optim,
+    },
+    Part {
+        file: "replay_low.safetensors",
+        save: |l| {
+            let r = &l.low_replay;
+            save_columns(r.ring(), &r.columns())
+        },
+        restore: |l, b| {
+            let (ring, columns) = l.low_replay.parts_mut();
+            restore_columns(b, ring, columns)
+        },
+    },
+    Part {
+        file: "replay_high.safetensors",
+        save: |l| {
+            let r = &l.high_replay;
+            save_columns(r.ring(), &r.columns())
+        },
+        restore: |l, b| {
+            let (ring, columns) = l.high_replay.parts_mut();
+            restore_columns(b, ring, columns)
+        },
+    },
+    Part {
+        file: "phi_store.safetensors",
+        save: save_phi_store,
+        restore: restore_phi_store,
+    },
+    Part {
+        file: "state.json",
+        save: |l| serde_json::to_vec_pretty(&State::of(l)).map_err(|e| e.to_string()),
+        restore: |l, b| {
+            let state: State = serde_json::from_slice(b).map_err(|e| e.to_string())?;
+            state.apply(l)
+        },
+    },
+];
+
+impl Learner {
+    /// Writes a checkpoint into `dir` (a run's `checkpoints/`, created if missing) as
+    /// `ckpt-N` with N one more than the newest there, then removes all but the newest
+    /// [`KEEP`]. Refused while a φ round runs ([`CheckpointError::RoundActive`]).
+    pub fn save_checkpoint(
+        &self,
+        config: &Config,
+        dir: &Path,
+    ) -> Result<Checkpoint, CheckpointError> {
+        if self.phi.is_active() || self.phi_store.is_frozen() {
+            return Err(CheckpointError::RoundActive);
+        }
+        fs::create_dir_all(dir).map_err(|source| io_error(dir, source))?;
+        let existing = list_checkpoints(dir)?;
+        let sequence = existing.last().map_or(1, |(seq, _)| seq + 1);
+        let tmp = dir.join(format!("{TMP_PREFIX}{sequence:06}"));
+        if tmp.exists() {
+            fs::remove_dir_all(&tmp).map_err(|source| io_error(&tmp, source))?;
+        }
+        fs::create_dir(&tmp).map_err(|source| io_error(&tmp, source))?;
+        let mut files = Vec::with_capacity(PARTS.len());
+        for part in PARTS {
+            let path = tmp.join(part.file);
+            let bytes = (part.save)(self).map_err(|problem| corrupt(&path, problem))?;
+            write_synced(&path, &bytes)?;
+            files.push(FileEntry {
+                name: part.file.to_owned(),
+                bytes: bytes.len() as u64,
+                checksum: format!("{:016x}", checksum(&bytes)),
+            });
+        }
+        let manifest = Manifest {
+            format_version: FORMAT_VERSION,
+            protocol_version: PROTOCOL_VERSION,
+            layout_hash: self.weights_layout_hash(),
+            config_fingerprint: config_fingerprint(config),
+            sequence,
+            env_steps: self.stats.env_steps,
+            updates_low: self.updates_low,
+            updates_high: self.updates_high,
+            files,
+        };
+        let manifest_path = tmp.join(MANIFEST);
+        let json = serde_json::to_vec_pretty(&manifest)
+            .map_err(|e| corrupt(&manifest_path, e.to_string()))?;
+        write_synced(&manifest_path, &json)?;
+        let path = dir.join(format!("{PREFIX}{sequence:06}"));
+        fs::rename(&tmp, &path).map_err(|source| io_error(&path, source))?;
+        sync_dir(dir)?;
+        prune(existing, KEEP.saturating_sub(1))?;
+        Ok(Checkpoint { path, manifest })
+    }
+
+    /// A learner restored from the checkpoint folder `path` (a `ckpt-N`), for `config` and the
+    /// task's `dims`. Refused with a [`CheckpointError`] naming the file when the checkpoint
+    /// is incompatible (format, protocol, layout, config), corrupt or truncated; nothing is
+    /// returned half-loaded.
+    pub fn restore_checkpoint(
+        config: &Config,
+        dims: TaskDims,
+        path: &Path,
+    ) -> Result<(Learner, Checkpoint), CheckpointError> {
+        // The episode length only derives the replay ratio, which the state file restores;
+        // the seed only initialises weights and generators, which are all restored.
+        let mut learner = Learner::with_episode_length(config, dims, 1, 0)?;
+        let manifest = read_manifest(path)?;
+        check_compatible(&learner, config, &manifest, &path.join(MANIFEST))?;
+        let blobs = read_files(path, &manifest)?;
+        for part in PARTS {
+            let file = path.join(part.file);
+            let bytes = blobs
+                .get(part.file)
+                .ok_or_else(|| corrupt(&file, "missing from the manifest"))?;
+            (part.restore)(&mut learner, bytes).map_err(|problem| corrupt(&file, problem))?;
+        }
+        learner.episodes = Episodes::default();
+        Ok((
+            learner,
+            Checkpoint {
+                path: path.to_path_buf(),
+                manifest,
+            },
+        ))
+    }
+
+    /// [`Learner::restore_checkpoint`] of the newest checkpoint in `dir` (a run's
+    /// `checkpoints/`); `None` when there is none.
+    pub fn restore_latest(
+        config: &Config,
+        dims: TaskDims,
+        dir: &Path,
+    ) -> Result<Option<(Learner, Checkpoint)>, CheckpointError> {
+        match latest_checkpoint(dir)? {
+            Some(path) => Self::restore_checkpoint(config, dims, &path).map(Some),
+            None => Ok(None),
+        }
+    }
+}
+
+/// Writes `bytes` to a new file at `path` and syncs it.
+fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
+    let mut file = fs::File::create(path).map_err(|source| io_error(path, source))?;
+    file.write_all(bytes)
+        .and_then(|()| file.sync_all())
+        .map_err(|source| io_error(path, source))
+}
+
+/// Syncs a folder so a rename inside it is durable.
+fn sync_dir(dir: &Path) -> Result<(), CheckpointError> {
+    fs::File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(|source| io_error(dir, source))
+}
+
+/// Removes the oldest of `existing` (oldest first) until `keep` remain.
+fn prune(existing: Vec<(u64, PathBuf)>, keep: usize) -> Result<(), CheckpointError> {
+    let n_remove = existing.len().saturating_sub(keep);
+    for (_, path) in existing.into_iter().take(n_remove) {
+        fs::remove_dir_all(&path).map_err(|source| io_error(&path, source))?;
+    }
+    Ok(())
+}
+
+fn read_manifest(dir: &Path) -> Result<Manifest, CheckpointError> {
+    let path = dir.join(MANIFEST);
+    let bytes = fs::read(&path).map_err(|source| io_error(&path, source))?;
+    serde_json::from_slice(&bytes).map_err(|e| corrupt(&path, format!("unreadable manifest: {e}")))
+}
+
+/// Versions, layout and config of `manifest` against this learner's.
+fn check_compatible(
+    learner: &Learner,
+    config: &Config,
+    manifest: &Manifest,
+    path: &Path,
+) -> Result<(), CheckpointError> {
+    let differ = |what, expected: String, found: String| {
+        Err(CheckpointError::Incompatible {
+            path: path.to_path_buf(),
+            what,
+            expected,
+            found,
+        })
+    };
+    if manifest.format_version != FORMAT_VERSION {
+        return differ(
+            "format version",
+            FORMAT_VERSION.to_string(),
+            manifest.format_version.to_string(),
+        );
+    }
+    if manifest.protocol_version != PROTOCOL_VERSION {
+        return differ(
+            "protocol version",
+            PROTOCOL_VERSION.to_string(),
+            manifest.protocol_version.to_string(),
+        );
+    }
+    let layout = learner.weights_layout_hash();
+    if manifest.layout_hash != layout {
+        return differ(
+            "network layout hash",
+            format!("{layout:016x}"),
+            format!("{:016x}", manifest.layout_hash),
+        );
+    }
+    let fingerprint = config_fingerprint(config);
+    if manifest.config_fingerprint != fingerprint {
+        return differ(
+            "config fingerprint (sections env, hierarchy, learner, replay, encoder)",
+            fingerprint,
+            manifest.config_fingerprint.clone(),
+        );
+    }
+    Ok(())
+}
+
+/// Every listed file, checked against its size and checksum.
+fn read_files(
+    dir: &Path,
+    manifest: &Manifest,
+) -> Result<HashMap<String, Vec<u8>>, CheckpointError> {
+    let mut out = HashMap::new();
+    for entry in &manifest.files {
+        if entry.name.contains(['/', '\\']) || entry.name.starts_with('.') {
+            return Err(corrupt(
+                &dir.join(MANIFEST),
+                format!("file name {:?} is not a plain file name", entry.name),
+            ));
+        }
+        let path = dir.join(&entry.name);
+        let bytes = fs::read(&path).map_err(|source| io_error(&path, source))?;
+        if bytes.len() as u64 != entry.bytes {
+            return Err(corrupt(
+                &path,
+                format!(
+                    "{} bytes, the manifest says {} (truncated?)",
+                    bytes.len(),
+                    entry.bytes
+                ),
+            ));
+        }
+        let sum = format!("{:016x}", checksum(&bytes));
+        if sum != entry.checksum {
+            return Err(corrupt(
+                &path,
+                format!("checksum {sum}, the manifest says {}", entry.checksum),
+            ));
+        }
+        out.insert(entry.name.clone(), bytes);
+    }
+    Ok(out)
+}
+
+/// Safetensors bytes of named f32 arrays `(name, shape, data)` with string metadata.
+fn to_safetensors(
+    arrays: Vec<(String, Vec<usize>, Vec<f32>)>,
+    metadata: HashMap<String, String>,
+) -> Result<Vec<u8>, String> {
+    let tensors = arrays
+        .into_iter()
+        .map(|(name, shape, data)| Tensor::from_vec(data, shape, &Device::Cpu).map(|t| (name, t)))
+        .collect::<candle_core::Result<Vec<_>>>()
+        .map_err(|e| e.to_string())?;
+    // One metadata entry holding sorted JSON: safetensors writes its metadata map in hash
+    // order, which would make equal states give different bytes.
+    let sorted: BTreeMap<String, String> = metadata.into_iter().collect();
+    let json = serde_json::to_string(&sorted).map_err(|e| e.to_string())?;
+    let metadata = HashMap::from([(META_KEY.to_owned(), json)]);
+    safetensors::serialize(tensors, Some(metadata)).map_err(|e| e.to_string())
+}
+
+/// The parsed file and its metadata.
+fn parse_safetensors(bytes: &[u8]) -> Result<(SafeTensors<'_>, HashMap<String, String>), String> {
+    let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| e.to_string())?;
+    let json = meta
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get(META_KEY))
+        .ok_or(format!("metadata `{META_KEY}` is missing"))?;
+    let metadata = serde_json::from_str(json).map_err(|e| format!("metadata: {e}"))?;
+    let st = SafeTensors::deserialize(bytes).map_err(|e| e.to_string())?;
+    Ok((st, metadata))
+}
+
+/// The f32 array `name` of `st`, checked to have `len` elements.
+fn f32_array(st: &SafeTensors, name: &str, len: usize) -> Result<Vec<f32>, String> {
+    let view = st
+        .tensor(name)
+        .map_err(|_| format!("tensor `{name}` is missing"))?;
+    if view.dtype() != safetensors::Dtype::F32 {
+        return Err(format!("tensor `{name}` is {:?}, not F32", view.dtype()));
+    }
+    let data = view.data();
+    if data.len() != len * 4 {
+        return Err(format!(
+            "tensor `{name}` has {} elements, expected {len}",
+            data.len() / 4
+        ));
+    }
+    Ok(data
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect())
+}
+
+/// A metadata value parsed from its string.
+fn meta<T: std::str::FromStr>(metadata: &HashMap<String, String>, key: &str) -> Result<T, String> {
+    metadata
+        .get(key)
+        .ok_or_else(|| format!("metadata `{key}` is missing"))?
+        .parse()
+        .map_err(|_| format!("metadata `{key}` = {:?} is not valid", metadata[key]))
+}
+
+/// Rows `0..len` of every column, the ring in metadata.
+fn save_columns(ring: &Ring, columns: &[(&'static str, &Column)]) -> Result<Vec<u8>, String> {
+    let len = ring.len();
+    let arrays = columns
+        .iter()
+        .map(|(name, col)| {
+            (
+                (*name).to_owned(),
+                vec![len, col.width()],
+                col.export_rows(len),
+            )
+        })
+        .collect();
+    let metadata = HashMap::from([
+        ("capacity".to_owned(), ring.capacity().to_string()),
+        ("len".to_owned(), len.to_string()),
+        ("next".to_owned(), ring.next().to_string()),
+        ("total".to_owned(), ring.total().to_string()),
+    ]);
+    to_safetensors(arrays, metadata)
+}
+
+/// Fills fresh columns and the ring from [`save_columns`] bytes.
+fn restore_columns(
+    bytes: &[u8],
+    ring: &mut Ring,
+    columns: [(&'static str, &mut Column); 8],
+) -> Result<(), String> {
+    let (st, metadata) = parse_safetensors(bytes)?;
+    let capacity: usize = meta(&metadata, "capacity")?;
+    if capacity != ring.capacity() {
+        return Err(format!(
+            "buffer capacity {capacity}, this config's is {}",
+            ring.capacity()
+        ));
+    }
+    let restored = Ring::restored(
+        capacity,
+        meta(&metadata, "len")?,
+        meta(&metadata, "next")?,
+        meta(&metadata, "total")?,
+    )
+    .ok_or("inconsistent ring bookkeeping (len, next, total)")?;
+    let data = columns
+        .iter()
+        .map(|(name, col)| f32_array(&st, name, restored.len() * col.width()))
+        .collect::<Result<Vec<_>, _>>()?;
+    for ((_, col), values) in columns.into_iter().zip(data) {
+        col.import_rows(&values);
+    }
+    *ring = restored;
+    Ok(())
+}
+
+/// Names of the optimisers and log α in `optim.safetensors`: `{level}.{name}`.
+fn save_optim(l: &Learner) -> Result<Vec<u8>, String> {
+    let mut arrays = Vec::new();
+    let mut metadata = HashMap::new();
+    let mut opts = vec![("phi".to_owned(), l.phi.checkpoint_parts().0)];
+    for (level, sac) in [("low", &l.nets.low), ("high", &l.nets.high)] {
+        let (level_opts, log_alpha) = sac.optimizers();
+        opts.extend(
+            level_opts
+                .into_iter()
+                .map(|(n, o)| (format!("{level}.{n}"), o)),
+        );
+        if let Some(var) = log_alpha {
+            let values = var
+                .as_tensor()
+                .flatten_all()
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| e.to_string())?;
+            arrays.push((format!("{level}.log_alpha"), vec![values.len()], values));
+        }
+    }
+    for (key, opt) in opts {
+        let state = opt.export_state();
+        metadata.insert(format!("{key}.step"), state.step.to_string());
+        for (i, (m, v)) in state.m.into_iter().zip(state.v).enumerate() {
+            arrays.push((format!("{key}.m.{i}"), vec![m.len()], m));
+            arrays.push((format!("{key}.v.{i}"), vec![v.len()], v));
+        }
+    }
+    to_safetensors(arrays, metadata)
+}
+
+/// One optimiser's state from `optim.safetensors`.
+fn adam_state(
+    st: &SafeTensors,
+    metadata: &HashMap<String, String>,
+    key: &str,
+    opt: &Adam,
+) -> Result<AdamState, String> {
+    let lens = opt
+        .export_state()
+        .m
+        .iter()
+        .map(Vec::len)
+        .collect::<Vec<_>>();
+    let mut state = AdamState {
+        step: meta(metadata, &format!("{key}.step"))?,
+        m: Vec::with_capacity(lens.len()),
+        v: Vec::with_capacity(lens.len()),
+    };
+    for (i, len) in lens.into_iter().enumerate() {
+        state.m.push(f32_array(st, &format!("{key}.m.{i}"), len)?);
+        state.v.push(f32_array(st, &format!("{key}.v.{i}"), len)?);
+    }
+    Ok(state)
+}
+
+fn restore_optim(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
+    let (st, metadata) = parse_safetensors(bytes)?;
+    for (level, sac) in [("low", &mut l.nets.low), ("high", &mut l.nets.high)] {
+        let (opts, log_alpha) = sac.optimizers_mut();
+        if let Some(var) = log_alpha {
+            let key = format!("{level}.log_alpha");
+            let values = f32_array(&st, &key, var.elem_count())?;
+            let tensor =
+                Tensor::from_vec(values, var.shape(), &Device::Cpu).map_err(|e| e.to_string())?;
+            var.set(&tensor).map_err(|e| e.to_string())?;
+        }
+        for (name, opt) in opts {
+            let key = format!("{level}.{name}");
+            let state = adam_state(&st, &metadata, &key, opt)?;
+            opt.import_state(state).map_err(|e| format!("{key}: {e}"))?;
+        }
+    }
+    let opt = l.phi.restore_parts().0;
+    let state = adam_state(&st, &metadata, "phi", opt)?;
+    opt.import_state(state).map_err(|e| format!("phi: {e}"))
+}
+
+fn save_phi_store(l: &Learner) -> Result<Vec<u8>, String> {
+    let (mut obs, mut priority, mut lengths) = (Vec::new(), Vec::new(), Vec::new());
+    for (o, p) in l.phi_store.runs() {
+        obs.extend_from_slice(o);
+        priority.extend_from_slice(p);
+        lengths.push(p.len());
+    }
+    let s = l.phi_store.stats();
+    let metadata = HashMap::from([
+        (
+            "run_states".to_owned(),
+            serde_json::to_string(&lengths).map_err(|e| e.to_string())?,
+        ),
+        (
+            "stats".to_owned(),
+            serde_json::to_string(&[
+                s.runs_stored,
+                s.fragments,
+                s.dropped_short,
+                s.evicted,
+                s.physics_failures,
+            ])
+            .map_err(|e| e.to_string())?,
+        ),
+    ]);
+    let (n_obs, n_states) = (obs.len(), priority.len());
+    to_safetensors(
+        vec![
+            ("obs".to_owned(), vec![n_obs], obs),
+            ("priority".to_owned(), vec![n_states], priority),
+        ],
+        metadata,
+    )
+}
+
+fn restore_phi_store(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
+    let (st, metadata) = parse_safetensors(bytes)?;
+    let lengths: Vec<usize> = serde_json::from_str(
+        metadata
+            .get("run_states")
+            .ok_or("metadata `run_states` is missing")?,
+    )
+    .map_err(|e| format!("metadata `run_states`: {e}"))?;
+    let [runs_stored, fragments, dropped_short, evicted, physics_failures]: [u64; 5] =
+        serde_json::from_str(metadata.get("stats").ok_or("metadata `stats` is missing")?)
+            .map_err(|e| format!("metadata `stats`: {e}"))?;
+    let n_states: usize = lengths.iter().sum();
+    let obs_dim = l.spec.obs_dim;
+    let obs = f32_array(&st, "obs", n_states * obs_dim)?;
+    let priority = f32_array(&st, "priority", n_states)?;
+    let (mut o, mut p) = (obs.as_slice(), priority.as_slice());
+    let mut runs = Vec::with_capacity(lengths.len());
+    for n in lengths {
+        let (run_obs, rest_obs) = o.split_at(n * obs_dim);
+        let (run_p, rest_p) = p.split_at(n);
+        runs.push((run_obs.to_vec(), run_p.to_vec()));
+        (o, p) = (rest_obs, rest_p);
+    }
+    let stats = StoreStats {
+        runs_stored,
+        fragments,
+        dropped_short,
+        evicted,
+        physics_failures,
+    };
+    l.phi_store.restore(runs, stats)
+}
+
+/// `state.json`: the scalar state of the learner.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct State {
+    updates_low: u64,
+    updates_high: u64,
+    policy_version: PolicyVersion,
+    phi_version: PhiVersion,
+    low_per_env_step: f64,
+    ingest: IngestState,
+    publish: PublishSaved,
+    schedule: (u64, u64, f64),
+    max_policy_lag: u64,
+    sampling_rng: Pcg64Mcg,
+    phi: PhiSaved,
+}
+
+/// [`IngestStats`] as saved.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IngestState {
+    chunks: u64,
+    env_steps: u64,
+    per_actor_steps: Vec<(u32, u64)>,
+    lost_chunks: u64,
+    duplicate_chunks: u64,
+    rejected_chunks: u64,
+    episodes_completed: u64,
+    high_transitions: u64,
+    dropped_segments: u64,
+    abandoned_episodes: u64,
+}
+
+/// [`PublishState`] as saved.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PublishSaved {
+    published_once: bool,
+    steps_at_last: u64,
+    updates_at_last: u64,
+    phi_at_last: PhiVersion,
+    schedule_at_last: (u64, f32, f32),
+}
+
+/// The φ trainer's scalars between rounds.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PhiSaved {
+    rng: Pcg64Mcg,
+    next_round: u64,
+    rounds: u64,
+    skipped_rounds: u64,
+    coalesced_rounds: u64,
+    steps: u64,
+    round_start_loss: f64,
+    round_end_loss: f64,
+}
+
+impl State {
+    fn of(l: &Learner) -> State {
+        let s = &l.stats;
+        let p = &l.publish;
+        let (_, phi_rng, next_round, phi_stats) = l.phi.checkpoint_parts();
+        State {
+            updates_low: l.updates_low,
+            updates_high: l.updates_high,
+            policy_version: l.policy_version,
+            phi_version: l.phi_version,
+            low_per_env_step: l.ratio.low_per_env_step,
+            ingest: IngestState {
+                chunks: s.chunks,
+                env_steps: s.env_steps,
+                per_actor_steps: s.per_actor_steps.iter().map(|(&a, &n)| (a, n)).collect(),
+                lost_chunks: s.lost_chunks,
+                duplicate_chunks: s.duplicate_chunks,
+                rejected_chunks: s.rejected_chunks,
+                episodes_completed: s.episodes_completed,
+                high_transitions: s.high_transitions,
+                dropped_segments: s.dropped_segments,
+                abandoned_episodes: s.abandoned_episodes,
+            },
+            publish: PublishSaved {
+                published_once: p.published_once,
+                steps_at_last: p.steps_at_last,
+                updates_at_last: p.updates_at_last,
+                phi_at_last: p.phi_at_last,
+                schedule_at_last: (
+                    p.schedule_at_last.train_episodes,
+                    p.schedule_at_last.count_prob,
+                    p.schedule_at_last.fr_prob,
+                ),
+            },
+            schedule: l.schedule.counters(),
+            max_policy_lag: l.telemetry.max_policy_lag,
+            sampling_rng: l.rng.clone(),
+            phi: PhiSaved {
+                rng: phi_rng.clone(),
+                next_round,
+                rounds: phi_stats.rounds,
+                skipped_rounds: phi_stats.skipped_rounds,
+                coalesced_rounds: phi_stats.coalesced_rounds,
+                steps: phi_stats.steps,
+                round_start_loss: phi_stats.round_start_loss,
+                round_end_loss: phi_stats.round_end_loss,
+            },
+        }
+    }
+
+    fn apply(self, l: &mut Learner) -> Result<(), String> {
+        if !(self.low_per_env_step.is_finite() && self.low_per_env_step >= 0.0) {
+            return Err(format!(
+                "low_per_env_step = {} is not a finite ratio ≥ 0",
+                self.low_per_env_step
+            ));
+        }
+        let i = self.ingest;
+        l.updates_low = self.updates_low;
+        l.updates_high = self.updates_high;
+        l.policy_version = self.policy_version;
+        l.phi_version = self.phi_version;
+        l.ratio.low_per_env_step = self.low_per_env_step;
+        l.stats = IngestStats {
+            chunks: i.chunks,
+            env_steps: i.env_steps,
+            per_actor_steps: i.per_actor_steps.into_iter().collect(),
+            lost_chunks: i.lost_chunks,
+            duplicate_chunks: i.duplicate_chunks,
+            rejected_chunks: i.rejected_chunks,
+            episodes_completed: i.episodes_completed,
+            high_transitions: i.high_transitions,
+            dropped_segments: i.dropped_segments,
+            abandoned_episodes: i.abandoned_episodes,
+        };
+        let p = self.publish;
+        let (train_episodes, count_prob, fr_prob) = p.schedule_at_last;
+        l.publish = PublishState {
+            published_once: p.published_once,
+            steps_at_last: p.steps_at_last,
+            updates_at_last: p.updates_at_last,
+            phi_at_last: p.phi_at_last,
+            schedule_at_last: RunSchedule {
+                train_episodes,
+                count_prob,
+                fr_prob,
+            },
+        };
+        l.schedule.restore_counters(self.schedule);
+        l.telemetry.max_policy_lag = self.max_policy_lag;
+        l.rng = self.sampling_rng;
+        let (_, rng, next_round, stats) = l.phi.restore_parts();
+        let f = self.phi;
+        *rng = f.rng;
+        *next_round = f.next_round;
+        stats.rounds = f.rounds;
+        stats.skipped_rounds = f.skipped_rounds;
+        stats.coalesced_rounds = f.coalesced_rounds;
+        stats.steps = f.steps;
+        stats.round_start_loss = f.round_start_loss;
+        stats.round_end_loss = f.round_end_loss;
+        Ok(())
+    }
+}

@@ -1,0 +1,277 @@
+//! Learner checkpoints: a restored learner is the saved one (every file it writes again is
+//! byte-identical, and it trains on exactly like the uninterrupted learner); incompatible,
+//! corrupt or truncated checkpoints are refused with an error naming the file and problem.
+
+mod common;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use common::*;
+use learner::learner::checkpoint::{latest_checkpoint, CheckpointError, Manifest, MANIFEST};
+use learner::Learner;
+
+/// φ rounds every 4 episodes (60 steps each), so the encoder's Adam and the φ store are live;
+/// replay capacity 256 low / 128 high transitions, so both rings wrap after 30 episodes.
+fn config() -> protocol::Config {
+    let mut c = common::config();
+    c.replay.capacity_steps = 256;
+    c.encoder.first_round_episode = 4;
+    c.encoder.interval_episodes = 4;
+    c.encoder.steps_per_round = 60;
+    c.encoder.batch_size = 8;
+    c.validate().unwrap();
+    c
+}
+
+/// A fresh folder under the temp dir for one test.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("asi-ckpt-{}-{name}", std::process::id()));
+    let _ = fs::remove_dir_all(&dir);
+    fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Trains until nothing is due (φ rounds run to completion).
+fn train_all(l: &mut Learner) {
+    while l.train(1_000).unwrap() > 0 {}
+}
+
+/// Ingests episodes `eps` (actor 0 and 1 alternating) and trains after each.
+fn play(l: &mut Learner, eps: std::ops::Range<u64>) {
+    for ep in eps {
+        ingest_episode(l, ep as u32 % 2, ep, 10, 2, 4);
+        train_all(l);
+    }
+}
+
+/// A learner with wrapped buffers, finished φ rounds and SAC updates behind it.
+fn trained() -> Learner {
+    let mut l = Learner::new(&config(), DIMS, 7).unwrap();
+    play(&mut l, 0..30);
+    assert!(l.low_replay().ring().total() > 256, "the low ring wrapped");
+    assert!(l.high_replay().ring().total() > 128, "the high ring wrapped");
+    assert!(l.phi_stats().rounds >= 2, "φ rounds ran");
+    l
+}
+
+fn read_manifest(ckpt: &Path) -> Manifest {
+    serde_json::from_slice(&fs::read(ckpt.join(MANIFEST)).unwrap()).unwrap()
+}
+
+fn losses(l: &Learner) -> Vec<(&'static str, f64)> {
+    l.metrics()
+        .into_iter()
+        .filter(|(n, _)| n.starts_with("losses/") || n.starts_with("phi/triplet"))
+        .collect()
+}
+
+#[test]
+fn a_restored_learner_writes_the_same_files_and_trains_on_exactly_like_the_original() {
+    let dir = scratch("round-trip");
+    let mut original = trained();
+    let saved = original.save_checkpoint(&config(), &dir).unwrap();
+    assert_eq!(saved.manifest.sequence, 1);
+    assert_eq!(saved.manifest.env_steps, 300);
+
+    let (mut restored, info) = Learner::restore_checkpoint(&config(), DIMS, &saved.path).unwrap();
+    assert_eq!(info.manifest, saved.manifest);
+    assert_eq!(restored.progress(), original.progress());
+    assert_eq!(restored.ingest_stats(), original.ingest_stats());
+    assert_eq!(restored.run_schedule(), original.run_schedule());
+    assert_eq!(restored.phi_stats().rounds, original.phi_stats().rounds);
+    for i in 0..original.low_replay().ring().len() {
+        let (a, b) = (original.low_replay().get(i), restored.low_replay().get(i));
+        assert_eq!(
+            (a.obs, a.phi, a.action),
+            (b.obs, b.phi, b.action),
+            "low row {i}"
+        );
+        assert_eq!(
+            (a.subgoal, a.next_obs),
+            (b.subgoal, b.next_obs),
+            "low row {i}"
+        );
+    }
+    assert_eq!(restored.low_replay().ring(), original.low_replay().ring());
+    assert_eq!(restored.high_replay().ring(), original.high_replay().ring());
+
+    // Every file — weights, Adam moments, buffers, φ store, counters and generators — is
+    // written again byte for byte by the restored learner.
+    let again = restored
+        .save_checkpoint(&config(), &scratch("round-trip-again"))
+        .unwrap();
+    assert_eq!(again.manifest.files, saved.manifest.files);
+
+    // Training on continues identically: same batches, same noise, same Adam steps.
+    play(&mut original, 30..36);
+    play(&mut restored, 30..36);
+    assert_eq!(restored.progress(), original.progress());
+    assert_eq!(losses(&restored), losses(&original));
+    assert_eq!(
+        nets::to_safetensors_bytes(restored.policy_varmap()).unwrap(),
+        nets::to_safetensors_bytes(original.policy_varmap()).unwrap()
+    );
+}
+
+#[test]
+fn only_the_newest_two_checkpoints_are_kept_and_unfinished_ones_are_ignored() {
+    let dir = scratch("keep");
+    let l = trained();
+    for _ in 0..3 {
+        l.save_checkpoint(&config(), &dir).unwrap();
+    }
+    fs::create_dir(dir.join(".tmp-ckpt-000009")).unwrap();
+    let mut names: Vec<String> = fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.starts_with("ckpt-"))
+        .collect();
+    names.sort();
+    assert_eq!(names, ["ckpt-000002", "ckpt-000003"]);
+    assert_eq!(
+        latest_checkpoint(&dir).unwrap(),
+        Some(dir.join("ckpt-000003"))
+    );
+    assert_eq!(latest_checkpoint(&dir.join("missing")).unwrap(), None);
+}
+
+#[test]
+fn no_checkpoint_is_taken_while_a_phi_round_runs() {
+    let mut l = Learner::new(&config(), DIMS, 7).unwrap();
+    for ep in 0..4 {
+        ingest_episode(&mut l, 0, ep, 10, 2, 4);
+    }
+    l.train(1).unwrap();
+    assert!(l.phi_round_active());
+    let err = l.save_checkpoint(&config(), &scratch("round")).unwrap_err();
+    assert!(matches!(err, CheckpointError::RoundActive), "{err}");
+}
+
+/// A saved checkpoint to damage.
+fn saved(name: &str) -> PathBuf {
+    trained()
+        .save_checkpoint(&config(), &scratch(name))
+        .unwrap()
+        .path
+}
+
+fn refused(ckpt: &Path, config: &protocol::Config) -> String {
+    match Learner::restore_checkpoint(config, DIMS, ckpt) {
+        Ok(_) => panic!("a damaged checkpoint was accepted"),
+        Err(err) => err.to_string(),
+    }
+}
+
+#[test]
+fn a_flipped_byte_is_refused_by_its_checksum_naming_the_file() {
+    let ckpt = saved("flip");
+    let file = ckpt.join("replay_low.safetensors");
+    let mut bytes = fs::read(&file).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x10;
+    fs::write(&file, bytes).unwrap();
+    let err = refused(&ckpt, &config());
+    assert!(
+        err.contains("replay_low.safetensors") && err.contains("checksum"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_truncated_file_is_refused_naming_the_file() {
+    let ckpt = saved("truncated");
+    let file = ckpt.join("critic.safetensors");
+    let bytes = fs::read(&file).unwrap();
+    fs::write(&file, &bytes[..bytes.len() - 100]).unwrap();
+    let err = refused(&ckpt, &config());
+    assert!(
+        err.contains("critic.safetensors") && err.contains("truncated"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_missing_file_or_unreadable_manifest_is_refused() {
+    let ckpt = saved("missing");
+    fs::remove_file(ckpt.join("state.json")).unwrap();
+    let err = refused(&ckpt, &config());
+    assert!(err.contains("state.json"), "{err}");
+
+    fs::write(ckpt.join(MANIFEST), b"{\"format_version\": 1,").unwrap();
+    let err = refused(&ckpt, &config());
+    assert!(
+        err.contains("manifest.json") && err.contains("unreadable"),
+        "{err}"
+    );
+}
+
+#[test]
+fn contents_that_pass_the_checksum_but_do_not_fit_are_refused() {
+    // A state file rewritten, with a matching manifest, to hold a field this build lacks.
+    let ckpt = saved("inconsistent");
+    let file = ckpt.join("state.json");
+    let text = fs::read_to_string(&file).unwrap();
+    let broken = text.replacen("\"updates_low\"", "\"updates_lo\"", 1);
+    fs::write(&file, &broken).unwrap();
+    let mut manifest = read_manifest(&ckpt);
+    let entry = manifest
+        .files
+        .iter_mut()
+        .find(|f| f.name == "state.json")
+        .unwrap();
+    entry.bytes = broken.len() as u64;
+    entry.checksum = format!(
+        "{:016x}",
+        learner::learner::checkpoint::checksum(broken.as_bytes())
+    );
+    fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&manifest).unwrap()).unwrap();
+    let err = refused(&ckpt, &config());
+    assert!(
+        err.contains("state.json") && err.contains("updates_lo"),
+        "{err}"
+    );
+}
+
+#[test]
+fn another_format_or_protocol_version_is_refused() {
+    let ckpt = saved("versions");
+    let original = read_manifest(&ckpt);
+    for (what, edit) in [
+        (
+            "format version",
+            (|m: &mut Manifest| m.format_version += 1) as fn(&mut Manifest),
+        ),
+        ("protocol version", |m: &mut Manifest| {
+            m.protocol_version += 1
+        }),
+    ] {
+        let mut m = original.clone();
+        edit(&mut m);
+        fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&m).unwrap()).unwrap();
+        let err = refused(&ckpt, &config());
+        assert!(
+            err.contains("incompatible") && err.contains(what),
+            "{what}: {err}"
+        );
+    }
+}
+
+#[test]
+fn another_network_layout_or_config_is_refused() {
+    let ckpt = saved("config");
+    let mut wider = config();
+    wider.encoder.hidden = vec![12];
+    let err = refused(&ckpt, &wider);
+    assert!(err.contains("network layout hash"), "{err}");
+
+    let mut bigger = config();
+    bigger.replay.capacity_steps = 512;
+    let err = refused(&ckpt, &bigger);
+    assert!(err.contains("config fingerprint"), "{err}");
+
+    // Sections outside the fingerprint may change on resume.
+    let mut longer = config();
+    longer.run.seed += 1;
+    Learner::restore_checkpoint(&longer, DIMS, &ckpt).unwrap();
+}
