@@ -198,6 +198,36 @@ impl SacLevel {
         })
     }
 
+    /// The optimisers by name — `policy`, `critic`, and `alpha` when α is tuned — and log α
+    /// (checkpoints).
+    pub(crate) fn optimizers(&self) -> (Vec<(&'static str, &Adam)>, Option<&Var>) {
+        let mut opts = vec![("policy", &self.policy_opt), ("critic", &self.critic_opt)];
+        let log_alpha = match &self.temperature {
+            Temperature::Fixed(_) => None,
+            Temperature::Tuned { log_alpha, opt, .. } => {
+                opts.push(("alpha", opt));
+                Some(log_alpha)
+            }
+        };
+        (opts, log_alpha)
+    }
+
+    /// As [`SacLevel::optimizers`], mutable (checkpoints).
+    pub(crate) fn optimizers_mut(&mut self) -> (Vec<(&'static str, &mut Adam)>, Option<&Var>) {
+        let mut opts = vec![
+            ("policy", &mut self.policy_opt),
+            ("critic", &mut self.critic_opt),
+        ];
+        let log_alpha = match &mut self.temperature {
+            Temperature::Fixed(_) => None,
+            Temperature::Tuned { log_alpha, opt, .. } => {
+                opts.push(("alpha", opt));
+                Some(&*log_alpha)
+            }
+        };
+        (opts, log_alpha)
+    }
+
     /// One update on `batch`; `next_eps` and `eps` are standard-normal noise `[B, action_dim]`
     /// for a' ~ π(·|s') and ã ~ π(·|s). Nothing is stepped if a loss is non-finite.
     pub fn update(
