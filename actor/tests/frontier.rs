@@ -729,3 +729,31 @@ fn fr_episodes_replay_exactly_for_a_seed() {
     );
     assert_eq!(run(), (first, stats));
 }
+
+/// The actions of the first episode of an actor on the deterministic low level with the given
+/// exploration noise, under `fr_prob`.
+fn low_actions(noise_scale: f64, random_eps: f64, fr_prob: f32) -> Vec<Vec<f32>> {
+    let mut config = config();
+    config.asi.stuck_threshold = 0.0;
+    config.learner.low.algo = protocol::config::LowAlgo::Deterministic;
+    config.learner.low.deterministic.actor_hidden = vec![32, 32];
+    config.learner.low.deterministic.critic_hidden = vec![32, 32];
+    config.learner.low.deterministic.noise_scale = noise_scale;
+    config.learner.low.deterministic.random_eps = random_eps;
+    let mut actor = actor(&config, 14, fr_prob);
+    let mut oracle = ScriptedOracle::new(straight_route);
+    episode(&mut actor, &mut oracle)
+        .iter()
+        .flat_map(decode)
+        .map(|r| r.action)
+        .collect()
+}
+
+#[test]
+fn the_low_level_navigates_without_exploration_noise() {
+    // Same seed, same weights, different noise settings: in navigation segments no noise is
+    // drawn or added, so the whole FR episode is the same step for step.
+    assert_eq!(low_actions(0.1, 0.0, 1.0), low_actions(0.5, 0.3, 1.0));
+    // Control: in a normal episode the noise settings change the actions.
+    assert_ne!(low_actions(0.1, 0.0, 0.0), low_actions(0.5, 0.3, 0.0));
+}
