@@ -3,8 +3,9 @@
 //! loop, so a run is deterministic for its seed: two runs with the same config produce
 //! identical `metrics.jsonl` files. Meant for debugging and for tests. Actors ask the
 //! graph-service (HESS exploration, reaching reports) by calling its request handler directly,
-//! with the same encoded messages as in process mode. Evaluations run inline when they fall
-//! due (same schedule and outputs as the evaluator process).
+//! with the same encoded messages as in process mode, and so does the learner for its
+//! self-imitation routes. Evaluations run inline when they fall due (same schedule and outputs
+//! as the evaluator process).
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -18,7 +19,7 @@ use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
 use protocol::ActorId;
 
 use crate::proc::actor::{actor_metrics, ReachMeans};
-use crate::proc::common::{task_info, CoverageTracker};
+use crate::proc::common::{task_info, CoverageTracker, GraphRoutes};
 use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
 use crate::run::RunContext;
 
@@ -54,6 +55,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         }
         catch_up(&mut learner)?;
         eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
+        self_imitate(&mut learner, &mut graph)?;
         let episodes = learner.ingest_stats().episodes_completed;
         if episodes != last_episodes {
             write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
@@ -83,6 +85,15 @@ fn catch_up(learner: &mut Learner) -> anyhow::Result<()> {
             p.env_steps_ingested,
             p.env_step_budget
         );
+    }
+    Ok(())
+}
+
+/// Runs every due self-imitation round with routes from the in-process graph-service. Called
+/// after the weights broadcast, so the graph already uses the learner's φ version.
+fn self_imitate(learner: &mut Learner, graph: &mut GraphService) -> anyhow::Result<()> {
+    while learner.si_pending() > 0 && !learner.phi_round_active() {
+        learner.train_self_imitation(&mut GraphRoutes::new(InProcessGraph(graph)))?;
     }
     Ok(())
 }

@@ -3,15 +3,14 @@
 //! while the learner's replay-ratio budget is used up (SPEC §6.8). HESS exploration requests and
 //! reaching reports go to the graph-service over the run's `graph` request–response service.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use actor::{Actor, ActorStats, GraphTransport, ServiceOracle};
+use actor::{Actor, ActorStats, ServiceOracle};
 use anyhow::Context;
-use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
 use protocol::{ActorId, ProcessRole, ProgressMessage};
 
-use super::common::{newest_weights, node, MetricsOut, StopWatch};
-use crate::channels::{Channels, GraphClient, WeightsSubscriber};
+use super::common::{newest_weights, node, IpcGraph, MetricsOut, StopWatch};
+use crate::channels::{Channels, WeightsSubscriber};
 use crate::run::RunContext;
 
 /// How long a throttled actor sleeps before re-checking its stop conditions.
@@ -192,41 +191,6 @@ impl ReachMeans {
             *last = now;
         }
         values
-    }
-}
-
-/// The graph-service over iceoryx2, with the configured timeout. After a call that got no
-/// answer (timeout, transport failure) the service counts as unreachable for one more timeout
-/// period: requests in that time are answered "no answer" at once, so a dead or busy
-/// graph-service costs the actor at most one timeout per period instead of one per decision.
-struct IpcGraph {
-    client: GraphClient,
-    timeout: Duration,
-    unreachable_until: Option<Instant>,
-    /// Calls that got no answer in time or failed in transport.
-    n_unreachable: u64,
-}
-
-impl IpcGraph {
-    fn new(client: GraphClient, timeout: Duration) -> Self {
-        Self { client, timeout, unreachable_until: None, n_unreachable: 0 }
-    }
-}
-
-impl GraphTransport for IpcGraph {
-    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
-        if let Some(until) = self.unreachable_until {
-            if Instant::now() < until {
-                return Err("graph-service unreachable (cooling down after a failed request)".to_owned());
-            }
-            self.unreachable_until = None;
-        }
-        self.client.call(*header, body, self.timeout).map_err(|err| {
-            self.n_unreachable += 1;
-            self.unreachable_until = Some(Instant::now() + self.timeout);
-            tracing::warn!("graph request failed, exploring from the policy for {:?}: {err:#}", self.timeout);
-            err.to_string()
-        })
     }
 }
 

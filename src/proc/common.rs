@@ -1,14 +1,18 @@
-//! What every child process shares: its node, the stop conditions, metrics publishing, and
-//! the task's dimensions.
+//! What every child process shares: its node, the stop conditions, metrics publishing, the
+//! task's dimensions, and the graph-service client (actors' questions, the learner's SI routes).
 
 use std::time::{Duration, Instant};
 
+use actor::{GraphTransport, ServiceOracle};
 use anyhow::Context;
 use iceoryx2::prelude::*;
 use nets::TaskDims;
 use protocol::transport::{open_node, Ipc, ValuePublisher};
-use protocol::{Config, MetricsSample, ProcessRole, StepLayout};
+use learner::{RouteSource, RoutesReply};
+use protocol::graph::{GraphRequestHeader, GraphResponseHeader, RouteQuery};
+use protocol::{Config, GraphRequest, GraphResponse, MetricsSample, PhiVersion, ProcessRole, StepLayout};
 
+use crate::channels::GraphClient;
 use crate::run::RunContext;
 
 /// What the processes need to know about the run's task.
@@ -153,6 +157,88 @@ impl CoverageTracker {
                 ("charts/coverage_free_cells_visited".to_owned(), c.n_visited_free_cells() as f64),
             ],
             None => Vec::new(),
+        }
+    }
+}
+
+/// The graph-service over iceoryx2, with the configured timeout. After a call that got no
+/// answer (timeout, transport failure) the service counts as unreachable for one more timeout
+/// period: requests in that time are answered "no answer" at once, so a dead or busy
+/// graph-service costs its client (an actor, or the learner asking for self-imitation routes) at
+/// most one timeout per period instead of one per request.
+pub struct IpcGraph {
+    client: GraphClient,
+    timeout: Duration,
+    unreachable_until: Option<Instant>,
+    /// Calls that got no answer in time or failed in transport.
+    pub n_unreachable: u64,
+}
+
+impl IpcGraph {
+    pub fn new(client: GraphClient, timeout: Duration) -> Self {
+        Self { client, timeout, unreachable_until: None, n_unreachable: 0 }
+    }
+}
+
+impl GraphTransport for IpcGraph {
+    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+        if let Some(until) = self.unreachable_until {
+            if Instant::now() < until {
+                return Err("graph-service unreachable (cooling down after a failed request)".to_owned());
+            }
+            self.unreachable_until = None;
+        }
+        self.client.call(*header, body, self.timeout).map_err(|err| {
+            self.n_unreachable += 1;
+            self.unreachable_until = Some(Instant::now() + self.timeout);
+            tracing::warn!("graph request failed; no graph requests for {:?}: {err:#}", self.timeout);
+            err.to_string()
+        })
+    }
+}
+
+/// A graph transport that remembers the φ version named by the last response header.
+pub struct PhiTracking<T> {
+    inner: T,
+    last_phi: Option<PhiVersion>,
+}
+
+impl<T: GraphTransport> GraphTransport for PhiTracking<T> {
+    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+        self.last_phi = None;
+        let reply = self.inner.call(header, body)?;
+        self.last_phi = Some(reply.0.phi_version);
+        Ok(reply)
+    }
+}
+
+/// The learner's self-imitation routes (SPEC §6.7) from the graph-service over any transport:
+/// one batched `Routes` request through [`ServiceOracle::ask`] (shared encoding and status
+/// handling). No answer (not ready, refused, timed out, wrong kind) is
+/// [`RoutesReply::NoAnswer`]; an answer from a graph built with another φ version than the
+/// learner's is [`RoutesReply::PhiMismatch`] (the points would not match).
+pub struct GraphRoutes<T> {
+    oracle: ServiceOracle<PhiTracking<T>>,
+}
+
+impl<T: GraphTransport> GraphRoutes<T> {
+    pub fn new(transport: T) -> Self {
+        Self { oracle: ServiceOracle::new(PhiTracking { inner: transport, last_phi: None }) }
+    }
+}
+
+impl<T: GraphTransport> RouteSource for GraphRoutes<T> {
+    fn routes(&mut self, queries: &[RouteQuery], phi_version: PhiVersion) -> RoutesReply {
+        let request = GraphRequest::Routes { queries: queries.to_vec() };
+        let answer = self.oracle.ask(&request, phi_version);
+        match (answer, self.oracle.transport().last_phi) {
+            (Some(GraphResponse::Routes(_)), Some(graph)) if graph != phi_version => RoutesReply::PhiMismatch { graph },
+            (Some(GraphResponse::Routes(answers)), _) => RoutesReply::Answered(answers),
+            (Some(other), _) => {
+                tracing::warn!(answer = ?other, "unusable answer to a routes request");
+                RoutesReply::NoAnswer
+            }
+            (None, _) => RoutesReply::NoAnswer,
         }
     }
 }

@@ -1,6 +1,7 @@
 //! `asi learner`: ingests trajectory chunks from every actor, trains at the configured replay
-//! ratio, publishes versioned weights and the throttle state. Sleeps on its channels' events
-//! when it has nothing to do.
+//! ratio, runs the due self-imitation rounds with routes from the graph-service (SPEC §6.7),
+//! publishes versioned weights and the throttle state. Sleeps on its channels' events when it
+//! has nothing to do.
 
 use std::time::{Duration, Instant};
 
@@ -10,7 +11,7 @@ use learner::Learner;
 use protocol::transport::{Ipc, ValuePublisher};
 use protocol::{ControlCommand, ProcessRole, ProgressMessage, PROTOCOL_VERSION};
 
-use super::common::{node, task_info, CoverageTracker, MetricsOut, StopWatch};
+use super::common::{node, task_info, CoverageTracker, GraphRoutes, IpcGraph, MetricsOut, StopWatch};
 use crate::channels::{Channels, WeightsPublisher};
 use crate::run::RunContext;
 
@@ -33,6 +34,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let control = channels.control_subscriber(&node)?;
     let progress = channels.progress_publisher(&node)?;
     let mut weights: Option<WeightsPublisher> = None;
+    let mut si_routes = si_route_source(config, &channels, &node)?;
     let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Learner, 0, config);
     let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
     let _chunks = waitset.attach_notification(trajectories.listener()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
@@ -51,6 +53,9 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         }
         ingest_all(&mut learner, &mut coverage, &trajectories);
         busy = learner.train(UPDATES_PER_TICK)? > 0;
+        if let Some(routes) = si_routes.as_mut() {
+            busy |= learner.train_self_imitation(routes)? > 0;
+        }
         publish_weights(&mut learner, &channels, &node, &mut weights)?;
         send_progress(&progress, &learner)?;
         if last_reconnect.elapsed() >= RECONNECT_INTERVAL {
@@ -66,6 +71,16 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner, &coverage));
     tracing::info!(reason, "learner stopping");
     write_final_status(ctx, &learner, reason)
+}
+
+/// The graph-service client for self-imitation routes; `None` when `asi.self_imitation` is off
+/// (no graph port is taken then).
+fn si_route_source(config: &protocol::Config, channels: &Channels, node: &Node<Ipc>) -> anyhow::Result<Option<GraphRoutes<IpcGraph>>> {
+    if !config.asi.self_imitation {
+        return Ok(None);
+    }
+    let timeout = Duration::from_millis(config.transport.graph_request_timeout_ms);
+    Ok(Some(GraphRoutes::new(IpcGraph::new(channels.graph_client(node)?, timeout))))
 }
 
 fn ingest_all(learner: &mut Learner, coverage: &mut CoverageTracker, trajectories: &crate::channels::TrajectorySubscriber) {
