@@ -140,6 +140,11 @@ pub struct TrainArgs {
     /// deterministic for a seed (for debugging and tests).
     #[arg(long)]
     pub serial: bool,
+    /// Start over even if the run folder holds a checkpoint. Without it, `asi train` on an
+    /// existing run folder resumes from its newest checkpoint (`checkpoints/`). The old
+    /// folder is moved aside to `<run-dir>.old-<unix seconds>`, never deleted.
+    #[arg(long)]
+    pub restart: bool,
 }
 
 /// Arguments every child process gets from the launcher.

@@ -4,10 +4,17 @@
 //! `run_dir/config.resolved.toml` together with the run id, and passes `--run-dir` and
 //! `--run-id` to each child, which reads the same file back. A child started with another run's
 //! id, or a resolved file of another protocol version, is refused.
+//!
+//! Checkpoints: the learner writes them to `run_dir/checkpoints/` ([`CHECKPOINT_DIR`]) every
+//! `run.checkpoint_interval_mins` and at a clean stop ([`CheckpointTimer`]), and starts from the
+//! newest one when there is one ([`open_learner`]); see `learner::learner::checkpoint`.
 
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
+use learner::learner::checkpoint::{Checkpoint, CheckpointError};
+use learner::{Learner, TaskDims};
 use protocol::config::RESOLVED_CONFIG_FILE;
 use protocol::{Config, RunId};
 
@@ -15,23 +22,42 @@ use protocol::{Config, RunId};
 pub const RUN_ID_FILE: &str = "run_id";
 /// Folder in the run folder where each process writes its final status at a clean exit.
 pub const STATUS_DIR: &str = "status";
+/// Folder in the run folder holding the learner's checkpoints (`ckpt-NNNNNN/`, newest two).
+pub const CHECKPOINT_DIR: &str = "checkpoints";
 
 #[derive(Debug, Clone)]
 pub struct RunContext {
     pub config: Config,
     pub run_dir: PathBuf,
     pub run_id: RunId,
+    /// Launcher side: this launch resumes from a checkpoint (outputs are appended to).
+    pub resume: bool,
 }
 
 impl RunContext {
-    /// Launcher side: creates the run folder, writes the resolved config and a fresh run id.
-    pub fn create(config: Config, run_dir: PathBuf) -> anyhow::Result<Self> {
-        std::fs::create_dir_all(run_dir.join(STATUS_DIR))
+    /// Launcher side: creates the run folder, writes the resolved config and a fresh run id,
+    /// and clears the status files of an earlier launch in the same folder; `resume` says
+    /// whether this launch continues from a checkpoint.
+    pub fn create(config: Config, run_dir: PathBuf, resume: bool) -> anyhow::Result<Self> {
+        let status = run_dir.join(STATUS_DIR);
+        if status.exists() {
+            std::fs::remove_dir_all(&status)
+                .with_context(|| format!("clearing {}", status.display()))?;
+        }
+        std::fs::create_dir_all(&status)
             .with_context(|| format!("creating run folder {}", run_dir.display()))?;
         let run_id = fresh_run_id(&config.run.name)?;
-        write_atomically(&run_dir.join(RESOLVED_CONFIG_FILE), &config.to_resolved_toml()?)?;
+        write_atomically(
+            &run_dir.join(RESOLVED_CONFIG_FILE),
+            &config.to_resolved_toml()?,
+        )?;
         write_atomically(&run_dir.join(RUN_ID_FILE), run_id.as_str())?;
-        Ok(Self { config, run_dir, run_id })
+        Ok(Self {
+            config,
+            run_dir,
+            run_id,
+            resume,
+        })
     }
 
     /// Child side: reads the resolved config and checks that `run_id` is this folder's run.
@@ -44,38 +70,67 @@ impl RunContext {
             );
         }
         let path = run_dir.join(RESOLVED_CONFIG_FILE);
-        let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
         let config = Config::from_toml_str(&text, &path.display().to_string())?;
-        Ok(Self { config, run_dir: run_dir.to_owned(), run_id: current })
+        Ok(Self {
+            config,
+            run_dir: run_dir.to_owned(),
+            run_id: current,
+            resume: false,
+        })
+    }
+
+    /// The run's checkpoint folder.
+    pub fn checkpoint_dir(&self) -> PathBuf {
+        self.run_dir.join(CHECKPOINT_DIR)
     }
 
     /// Path of a process's final status file.
     pub fn status_path(&self, process: &str) -> PathBuf {
-        self.run_dir.join(STATUS_DIR).join(format!("{process}.json"))
+        self.run_dir
+            .join(STATUS_DIR)
+            .join(format!("{process}.json"))
     }
 
     /// Marks a service process as ready (its subscribers exist), so the launcher can start
     /// actors without losing their first chunks.
     pub fn mark_ready(&self, process: &str) -> anyhow::Result<()> {
-        write_atomically(&self.run_dir.join(STATUS_DIR).join(format!("{process}.ready")), "")
+        write_atomically(
+            &self
+                .run_dir
+                .join(STATUS_DIR)
+                .join(format!("{process}.ready")),
+            "",
+        )
     }
 
     /// Whether a service process has marked itself ready.
     pub fn is_ready(&self, process: &str) -> bool {
-        self.run_dir.join(STATUS_DIR).join(format!("{process}.ready")).exists()
+        self.run_dir
+            .join(STATUS_DIR)
+            .join(format!("{process}.ready"))
+            .exists()
     }
 
     /// Writes a process's final status (JSON) atomically.
     pub fn write_status(&self, process: &str, status: &serde_json::Value) -> anyhow::Result<()> {
-        write_atomically(&self.status_path(process), &serde_json::to_string_pretty(status)?)
+        write_atomically(
+            &self.status_path(process),
+            &serde_json::to_string_pretty(status)?,
+        )
     }
 }
 
 /// Reads the run id stored in a run folder.
 pub fn read_run_id(run_dir: &Path) -> anyhow::Result<RunId> {
     let path = run_dir.join(RUN_ID_FILE);
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("reading {} (is this a run folder of `asi train`?)", path.display()))?;
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "reading {} (is this a run folder of `asi train`?)",
+            path.display()
+        )
+    })?;
     Ok(RunId::new(text.trim())?)
 }
 
@@ -91,5 +146,107 @@ fn fresh_run_id(name: &str) -> anyhow::Result<RunId> {
 pub fn write_atomically(path: &Path, text: &str) -> anyhow::Result<()> {
     let tmp = path.with_extension("tmp");
     std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+}
+
+/// The run's learner: restored from the newest checkpoint in `checkpoints/` when there is one
+/// (an incompatible or damaged one is an error, never silently replaced), else a new one
+/// seeded with `run.seed`.
+pub fn open_learner(
+    ctx: &RunContext,
+    dims: TaskDims,
+    episode_length: u32,
+) -> anyhow::Result<Learner> {
+    let dir = ctx.checkpoint_dir();
+    let start = Instant::now();
+    let restored = Learner::restore_latest(&ctx.config, dims, &dir).with_context(|| {
+        format!(
+            "restoring the learner from {} (start over with `asi train --restart`)",
+            dir.display()
+        )
+    })?;
+    match restored {
+        Some((learner, ckpt)) => {
+            let m = &ckpt.manifest;
+            tracing::info!(
+                checkpoint = m.sequence,
+                env_steps = m.env_steps,
+                updates_low = m.updates_low,
+                secs = start.elapsed().as_secs_f64(),
+                "learner resumed from {}",
+                ckpt.path.display()
+            );
+            Ok(learner)
+        }
+        None => {
+            Learner::with_episode_length(&ctx.config, dims, episode_length, ctx.config.run.seed)
+                .context("building the learner")
+        }
+    }
+}
+
+/// When the learner writes checkpoints: every `run.checkpoint_interval_mins`, retried at each
+/// tick while a φ round defers it, and once more at a clean stop.
+pub struct CheckpointTimer {
+    interval: Duration,
+    last: Instant,
+}
+
+impl CheckpointTimer {
+    /// A timer for `config`'s interval, starting now.
+    pub fn new(config: &Config) -> Self {
+        Self {
+            interval: Duration::from_secs_f64(config.run.checkpoint_interval_mins * 60.0),
+            last: Instant::now(),
+        }
+    }
+
+    /// Writes a checkpoint if one is due and no φ round runs; a failed write is logged and
+    /// retried at the next interval (training goes on).
+    pub fn tick(&mut self, ctx: &RunContext, learner: &Learner) {
+        if self.last.elapsed() < self.interval {
+            return;
+        }
+        match save_checkpoint(ctx, learner) {
+            Ok(Some(_)) => self.last = Instant::now(),
+            Ok(None) => {}
+            Err(err) => {
+                tracing::error!("writing a checkpoint failed: {err:#}");
+                self.last = Instant::now();
+            }
+        }
+    }
+}
+
+/// A checkpoint at a clean stop: a running φ round is first run to its end (its state is not
+/// saved), then the checkpoint is written.
+pub fn final_checkpoint(ctx: &RunContext, learner: &mut Learner) -> anyhow::Result<Checkpoint> {
+    while learner.phi_round_active() {
+        learner
+            .train(usize::MAX)
+            .context("finishing the φ round before the final checkpoint")?;
+    }
+    save_checkpoint(ctx, learner)?.context("a φ round is still running after it was finished")
+}
+
+/// Writes a checkpoint and logs its size and write time; `None` when a φ round defers it.
+fn save_checkpoint(ctx: &RunContext, learner: &Learner) -> anyhow::Result<Option<Checkpoint>> {
+    let start = Instant::now();
+    match learner.save_checkpoint(&ctx.config, &ctx.checkpoint_dir()) {
+        Ok(ckpt) => {
+            let m = &ckpt.manifest;
+            tracing::info!(
+                checkpoint = m.sequence,
+                env_steps = m.env_steps,
+                mib = m.total_bytes() as f64 / (1 << 20) as f64,
+                secs = start.elapsed().as_secs_f64(),
+                "checkpoint written to {}",
+                ckpt.path.display()
+            );
+            Ok(Some(ckpt))
+        }
+        Err(CheckpointError::RoundActive) => Ok(None),
+        Err(err) => Err(err).context("writing a checkpoint"),
+    }
 }

@@ -7,7 +7,6 @@
 //! self-imitation routes. Evaluations run inline when they fall due (same schedule and outputs
 //! as the evaluator process).
 
-use std::fs::File;
 use std::io::{BufWriter, Write};
 
 use actor::eval::Evaluator;
@@ -31,14 +30,16 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let task = task_info(config)?;
     let dims = task.dims;
     let seed = config.run.seed;
-    let mut learner =
-        Learner::with_episode_length(config, dims, task.episode_length, seed).context("building the learner")?;
+    let mut learner = crate::run::open_learner(&ctx, dims, task.episode_length)?;
     let mut graph = GraphService::new(config, dims, seed).context("building the graph-service")?;
     let mut actors = (0..config.run.n_actors as u32)
         .map(|id| Actor::new(config, ActorId(id), seed))
         .collect::<Result<Vec<_>, _>>()
         .context("building the actors")?;
-    let mut metrics = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
+    // A resumed run continues its metrics file.
+    let metrics_file =
+        std::fs::OpenOptions::new().create(true).write(true).append(ctx.resume).truncate(!ctx.resume).open(ctx.run_dir.join("metrics.jsonl"))?;
+    let mut metrics = BufWriter::new(metrics_file);
     let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
     let mut eval = SerialEval::new(config)?;
     let mut coverage = CoverageTracker::new(config, task.layout)?;
@@ -64,6 +65,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     }
     write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
     metrics.flush()?;
+    crate::run::final_checkpoint(&ctx, &mut learner)?;
     tracing::info!(env_steps = learner.progress().env_steps_ingested, "serial run finished");
     Ok(())
 }

@@ -59,7 +59,12 @@ impl Children {
     pub fn new(ctx: &RunContext) -> anyhow::Result<Self> {
         std::fs::create_dir_all(ctx.run_dir.join("logs"))?;
         let exe = std::env::current_exe().context("finding the asi executable")?;
-        Ok(Self { ctx: ctx.clone(), exe, children: Vec::new(), restarts: 0 })
+        Ok(Self {
+            ctx: ctx.clone(),
+            exe,
+            children: Vec::new(),
+            restarts: 0,
+        })
     }
 
     pub fn total_restarts(&self) -> u64 {
@@ -68,7 +73,12 @@ impl Children {
 
     pub fn spawn(&mut self, kind: ChildKind) -> anyhow::Result<()> {
         let process = self.start(kind, 0)?;
-        self.children.push(Supervised { kind, process: Some(process), incarnation: 0, restart_at: None });
+        self.children.push(Supervised {
+            kind,
+            process: Some(process),
+            incarnation: 0,
+            restart_at: None,
+        });
         Ok(())
     }
 
@@ -76,15 +86,23 @@ impl Children {
     /// restarts). Its own process group keeps a terminal Ctrl-C away from it: the launcher
     /// decides the shutdown order.
     fn start(&self, kind: ChildKind, incarnation: u32) -> anyhow::Result<Child> {
-        let log_path = self.ctx.run_dir.join("logs").join(format!("{}.log", kind.name()));
+        let log_path = self
+            .ctx
+            .run_dir
+            .join("logs")
+            .join(format!("{}.log", kind.name()));
         let log = File::options().create(true).append(true).open(&log_path)?;
         let mut command = Command::new(&self.exe);
         match kind {
             ChildKind::GraphService => command.arg("graph-service"),
             ChildKind::Learner => command.arg("learner"),
-            ChildKind::Actor(id) => {
-                command.args(["actor", "--actor-id", &id.to_string(), "--incarnation", &incarnation.to_string()])
-            }
+            ChildKind::Actor(id) => command.args([
+                "actor",
+                "--actor-id",
+                &id.to_string(),
+                "--incarnation",
+                &incarnation.to_string(),
+            ]),
             ChildKind::Evaluator => command.arg("evaluator"),
         };
         command
@@ -95,9 +113,15 @@ impl Children {
             .stdout(log.try_clone()?)
             .stderr(log)
             .process_group(0);
-        let child = command.spawn().with_context(|| format!("spawning {}", kind.name()))?;
+        let child = command
+            .spawn()
+            .with_context(|| format!("spawning {}", kind.name()))?;
         // For operators and fault-injection tests: which pid is which process right now.
-        let pid_file = self.ctx.run_dir.join(crate::run::STATUS_DIR).join(format!("{}.pid", kind.name()));
+        let pid_file = self
+            .ctx
+            .run_dir
+            .join(crate::run::STATUS_DIR)
+            .join(format!("{}.pid", kind.name()));
         crate::run::write_atomically(&pid_file, &child.id().to_string())?;
         Ok(child)
     }
@@ -114,7 +138,11 @@ impl Children {
                     return Ok(Some(format!(
                         "{} exited unexpectedly ({status}); see {}",
                         child.kind.name(),
-                        self.ctx.run_dir.join("logs").join(format!("{}.log", child.kind.name())).display()
+                        self.ctx
+                            .run_dir
+                            .join("logs")
+                            .join(format!("{}.log", child.kind.name()))
+                            .display()
                     )));
                 }
             }
@@ -186,7 +214,9 @@ impl Children {
     /// Sends SIGTERM to every running child selected by `which`, waits for them, and kills any
     /// that outlive the grace period.
     pub fn stop_kind(&mut self, which: impl Fn(ChildKind) -> bool) {
-        let selected: Vec<usize> = (0..self.children.len()).filter(|&i| which(self.children[i].kind)).collect();
+        let selected: Vec<usize> = (0..self.children.len())
+            .filter(|&i| which(self.children[i].kind))
+            .collect();
         for &i in &selected {
             self.children[i].restart_at = None;
             if let Some(process) = &self.children[i].process {
@@ -204,7 +234,9 @@ impl Children {
 }
 
 fn backoff(incarnation: u32) -> Duration {
-    FIRST_BACKOFF.saturating_mul(1 << incarnation.min(16)).min(MAX_BACKOFF)
+    FIRST_BACKOFF
+        .saturating_mul(1 << incarnation.min(16))
+        .min(MAX_BACKOFF)
 }
 
 fn terminate(pid: u32) {

@@ -45,13 +45,40 @@ pub struct MetricsBook {
 }
 
 impl MetricsBook {
-    pub fn create(ctx: &RunContext) -> anyhow::Result<Self> {
-        let jsonl = BufWriter::new(File::create(ctx.run_dir.join("metrics.jsonl"))?);
-        let mut csv = BufWriter::new(File::create(ctx.run_dir.join("metrics.csv"))?);
-        writeln!(csv, "wall_secs,env_steps_per_sec,actor_restarts,{}", CSV_COLUMNS.join(","))?;
+    /// The book of a run; `resume`: append to the run's `metrics.jsonl` and `metrics.csv`
+    /// (a resumed run continues its curves) instead of starting them anew.
+    pub fn create(ctx: &RunContext, resume: bool) -> anyhow::Result<Self> {
+        let open = |name: &str| -> anyhow::Result<(File, bool)> {
+            let path = ctx.run_dir.join(name);
+            let fresh = !resume || std::fs::metadata(&path).map_or(true, |m| m.len() == 0);
+            let file = std::fs::OpenOptions::new()
+                .create(true)
+                .write(true)
+                .append(!fresh)
+                .truncate(fresh)
+                .open(&path)?;
+            Ok((file, fresh))
+        };
+        let jsonl = BufWriter::new(open("metrics.jsonl")?.0);
+        let (csv_file, csv_fresh) = open("metrics.csv")?;
+        let mut csv = BufWriter::new(csv_file);
+        if csv_fresh {
+            writeln!(
+                csv,
+                "wall_secs,env_steps_per_sec,actor_restarts,{}",
+                CSV_COLUMNS.join(",")
+            )?;
+        }
         let tensorboard = EventWriter::create(&ctx.run_dir.join("tensorboard"))?;
-        let bar = if std::io::stderr().is_terminal() { ProgressBar::new_spinner() } else { ProgressBar::hidden() };
-        bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").unwrap_or_else(|_| ProgressStyle::default_spinner()));
+        let bar = if std::io::stderr().is_terminal() {
+            ProgressBar::new_spinner()
+        } else {
+            ProgressBar::hidden()
+        };
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
         bar.enable_steady_tick(Duration::from_millis(200));
         Ok(Self {
             values: BTreeMap::new(),
@@ -87,7 +114,8 @@ impl MetricsBook {
     pub fn budget_reached(&self, config: &Config) -> bool {
         let steps = self.get("learner/ingest/env_steps") as u64;
         let episodes = self.get("learner/ingest/episodes_completed") as u64;
-        config.run.max_env_steps.is_some_and(|max| steps >= max) || episodes >= config.run.max_episodes
+        config.run.max_env_steps.is_some_and(|max| steps >= max)
+            || episodes >= config.run.max_episodes
     }
 
     pub fn show_progress(&mut self, restarts: u64) {
@@ -117,22 +145,43 @@ impl MetricsBook {
         let wall = self.started.elapsed().as_secs_f64();
         let mut object = serde_json::Map::new();
         object.insert("wall_secs".to_owned(), serde_json::json!(wall));
-        object.insert("launcher/env_steps_per_sec".to_owned(), serde_json::json!(self.rate.per_sec()));
-        object.insert("launcher/actor_restarts".to_owned(), serde_json::json!(restarts));
+        object.insert(
+            "launcher/env_steps_per_sec".to_owned(),
+            serde_json::json!(self.rate.per_sec()),
+        );
+        object.insert(
+            "launcher/actor_restarts".to_owned(),
+            serde_json::json!(restarts),
+        );
         for (key, value) in &self.values {
             object.insert(key.clone(), serde_json::json!(value));
         }
         writeln!(self.jsonl, "{}", serde_json::Value::Object(object))?;
-        let columns: Vec<String> = CSV_COLUMNS.iter().map(|k| self.get(k).to_string()).collect();
-        writeln!(self.csv, "{wall:.3},{:.1},{restarts},{}", self.rate.per_sec(), columns.join(","))?;
+        let columns: Vec<String> = CSV_COLUMNS
+            .iter()
+            .map(|k| self.get(k).to_string())
+            .collect();
+        writeln!(
+            self.csv,
+            "{wall:.3},{:.1},{restarts},{}",
+            self.rate.per_sec(),
+            columns.join(",")
+        )?;
         let mut scalars: Vec<(&str, f32)> = vec![
             ("launcher/env_steps_per_sec", self.rate.per_sec() as f32),
             ("launcher/actor_restarts", restarts as f32),
         ];
-        scalars.extend(self.values.iter().map(|(key, value)| (key.as_str(), *value as f32)));
-        let unix = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        scalars.extend(
+            self.values
+                .iter()
+                .map(|(key, value)| (key.as_str(), *value as f32)),
+        );
+        let unix = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
         let step = self.get("learner/ingest/env_steps") as i64;
-        self.tensorboard.add_scalars(step, unix.as_secs_f64(), &scalars)?;
+        self.tensorboard
+            .add_scalars(step, unix.as_secs_f64(), &scalars)?;
         self.jsonl.flush()?;
         self.csv.flush()?;
         self.tensorboard.flush()?;
@@ -146,11 +195,22 @@ impl MetricsBook {
     /// logged, never fatal.
     pub fn plot(&mut self) {
         self.last_plot = Instant::now();
-        let metrics: Vec<String> = crate::plot::DEFAULT_METRICS.iter().map(|m| (*m).to_owned()).collect();
+        let metrics: Vec<String> = crate::plot::DEFAULT_METRICS
+            .iter()
+            .map(|m| (*m).to_owned())
+            .collect();
         let drawn = std::fs::create_dir_all(self.run_dir.join("plots"))
             .map_err(anyhow::Error::from)
-            .and_then(|()| crate::plot::build_figure(std::slice::from_ref(&self.run_dir), crate::plot::DEFAULT_X, &metrics))
-            .and_then(|figure| crate::plot::render_png(&figure, &self.run_dir.join("plots").join("curves.png")));
+            .and_then(|()| {
+                crate::plot::build_figure(
+                    std::slice::from_ref(&self.run_dir),
+                    crate::plot::DEFAULT_X,
+                    &metrics,
+                )
+            })
+            .and_then(|figure| {
+                crate::plot::render_png(&figure, &self.run_dir.join("plots").join("curves.png"))
+            });
         if let Err(err) = drawn {
             tracing::warn!("plots/curves.png not drawn: {err:#}");
         }
@@ -189,12 +249,15 @@ impl RateMeter {
         if self.window.last().is_none_or(|&(_, s)| s != steps) {
             self.window.push((now, steps));
         }
-        self.window.retain(|&(t, _)| now.duration_since(t) <= Self::SPAN);
+        self.window
+            .retain(|&(t, _)| now.duration_since(t) <= Self::SPAN);
     }
 
     fn per_sec(&self) -> f64 {
         match (self.window.first(), self.window.last()) {
-            (Some(&(t0, s0)), Some(&(t1, s1))) if t1 > t0 => (s1 - s0) / t1.duration_since(t0).as_secs_f64(),
+            (Some(&(t0, s0)), Some(&(t1, s1))) if t1 > t0 => {
+                (s1 - s0) / t1.duration_since(t0).as_secs_f64()
+            }
             _ => 0.0,
         }
     }

@@ -13,6 +13,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use iceoryx2::prelude::*;
+use learner::learner::checkpoint::{
+    config_fingerprint, latest_checkpoint, Manifest, FORMAT_VERSION, MANIFEST,
+};
 use protocol::{ControlCommand, ControlMessage};
 
 use crate::channels::Channels;
@@ -23,8 +26,10 @@ use metrics::MetricsBook;
 
 /// Supervisor tick: how often children and metrics are checked.
 const TICK: Duration = Duration::from_millis(100);
-/// How long learner and graph-service may take to drain and exit after a Stop message.
-const SERVICE_STOP_WAIT: Duration = Duration::from_secs(10);
+/// How long learner and graph-service may take to drain, write their final checkpoint and exit
+/// after a Stop message (a checkpoint with a 1 M-step replay buffer takes seconds; SIGTERM
+/// during the write loses only that checkpoint, never an older one).
+const SERVICE_STOP_WAIT: Duration = Duration::from_secs(120);
 /// How long service processes may take to open their channels.
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
 
@@ -43,7 +48,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let channels = Channels::new(config, &ctx.run_id, &layout);
     let metrics_in = channels.metrics_subscriber(&node)?;
     let control = channels.control_publisher(&node)?;
-    let mut book = MetricsBook::create(&ctx)?;
+    let mut book = MetricsBook::create(&ctx, ctx.resume)?;
     let mut children = Children::new(&ctx)?;
     children.spawn(ChildKind::GraphService)?;
     children.spawn(ChildKind::Learner)?;
@@ -75,7 +80,11 @@ fn clean_stale_resources(node: &Node<protocol::transport::Ipc>) {
     tracing::debug!(?state, "cleaned iceoryx2 resources of dead nodes");
 }
 
-fn wait_until_ready(ctx: &RunContext, node: &Node<protocol::transport::Ipc>, children: &mut Children) -> anyhow::Result<()> {
+fn wait_until_ready(
+    ctx: &RunContext,
+    node: &Node<protocol::transport::Ipc>,
+    children: &mut Children,
+) -> anyhow::Result<()> {
     let start = Instant::now();
     while !(ctx.is_ready("learner") && ctx.is_ready("graph-service")) {
         if node.wait(TICK).is_err() {
@@ -85,7 +94,10 @@ fn wait_until_ready(ctx: &RunContext, node: &Node<protocol::transport::Ipc>, chi
             bail!(failure);
         }
         if start.elapsed() > STARTUP_TIMEOUT {
-            bail!("learner or graph-service not ready after {STARTUP_TIMEOUT:?}; see {}/logs/", ctx.run_dir.display());
+            bail!(
+                "learner or graph-service not ready after {STARTUP_TIMEOUT:?}; see {}/logs/",
+                ctx.run_dir.display()
+            );
         }
     }
     Ok(())
@@ -122,7 +134,10 @@ fn supervise(
 
 /// Actors first (so everything they sent can be drained), then the services: a Stop message,
 /// and SIGTERM for any that has not exited after [`SERVICE_STOP_WAIT`].
-fn shutdown(control: &protocol::transport::ValuePublisher<ControlMessage>, children: &mut Children) {
+fn shutdown(
+    control: &protocol::transport::ValuePublisher<ControlMessage>,
+    children: &mut Children,
+) {
     children.stop_kind(|k| k.restartable());
     if let Err(err) = control.send(ControlMessage::new(1, ControlCommand::Stop)) {
         tracing::warn!("could not send Stop: {err:#}");
@@ -133,7 +148,10 @@ fn shutdown(control: &protocol::transport::ValuePublisher<ControlMessage>, child
     children.stop_kind(|_| true);
 }
 
-/// Resolves `asi train`'s arguments into a run context (writes the resolved config).
+/// Resolves `asi train`'s arguments into a run context (writes the resolved config). An
+/// existing run folder with a checkpoint is resumed ("resuming from checkpoint N (env steps
+/// S)"), after checking that the checkpoint fits this build and config; with `--restart` the
+/// old folder is first moved aside ([`move_aside`]) and the run starts over.
 pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
     let mut overrides = args.set.clone();
     if let Some(seed) = args.seed {
@@ -142,11 +160,100 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
     if let Some(actors) = args.actors {
         overrides.push(format!("run.n_actors={actors}"));
     }
-    let config = protocol::Config::load(args.config.as_deref(), &overrides)
-        .with_context(|| match &args.config {
+    let config =
+        protocol::Config::load(args.config.as_deref(), &overrides).with_context(|| match &args
+            .config
+        {
             Some(path) => format!("loading config {}", path.display()),
             None => "loading the default config (AntMaze-U)".to_owned(),
         })?;
     let run_dir = args.run_dir.clone().unwrap_or_else(|| config.run.run_dir());
-    RunContext::create(config, run_dir)
+    if args.restart {
+        if let Some(old) = move_aside(&run_dir)? {
+            println!(
+                "restarting: the previous run folder was moved to {}",
+                old.display()
+            );
+        }
+    }
+    let resume = match resume_point(&config, &run_dir)? {
+        Some(manifest) => {
+            println!(
+                "resuming from checkpoint {} (env steps {})",
+                manifest.sequence, manifest.env_steps
+            );
+            true
+        }
+        None => false,
+    };
+    RunContext::create(config, run_dir, resume)
+}
+
+/// The manifest of the checkpoint a launch in `run_dir` resumes from, checked against this
+/// build and `config` up front so an incompatible one stops the launch with a clear error.
+fn resume_point(
+    config: &protocol::Config,
+    run_dir: &std::path::Path,
+) -> anyhow::Result<Option<Manifest>> {
+    let dir = run_dir.join(crate::run::CHECKPOINT_DIR);
+    let Some(path) = latest_checkpoint(&dir)? else {
+        return Ok(None);
+    };
+    let manifest_path = path.join(MANIFEST);
+    let text = std::fs::read(&manifest_path)
+        .with_context(|| format!("reading {}", manifest_path.display()))?;
+    let manifest: Manifest = serde_json::from_slice(&text).with_context(|| {
+        format!(
+            "{} is unreadable; start over with --restart",
+            manifest_path.display()
+        )
+    })?;
+    let fingerprint = config_fingerprint(config);
+    let versions = (manifest.format_version, manifest.protocol_version);
+    if versions != (FORMAT_VERSION, protocol::PROTOCOL_VERSION) {
+        bail!(
+            "checkpoint {} has format/protocol version {versions:?}, this build writes ({FORMAT_VERSION}, {}); \
+             start over with --restart",
+            path.display(),
+            protocol::PROTOCOL_VERSION
+        );
+    }
+    if manifest.config_fingerprint != fingerprint {
+        bail!(
+            "checkpoint {} was written with another config (sections env, hierarchy, learner, replay, encoder \
+             differ: fingerprint {} vs {fingerprint}); resume with the same config, or start over with --restart",
+            path.display(),
+            manifest.config_fingerprint
+        );
+    }
+    Ok(Some(manifest))
+}
+
+/// `--restart`: renames an existing, non-empty `run_dir` to `<run_dir>.old-<unix seconds>`
+/// (nothing is deleted) and returns the new name; `None` when there was nothing to move.
+pub fn move_aside(run_dir: &std::path::Path) -> anyhow::Result<Option<std::path::PathBuf>> {
+    let empty = match std::fs::read_dir(run_dir) {
+        Ok(mut entries) => entries.next().is_none(),
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(err) => return Err(err).with_context(|| format!("reading {}", run_dir.display())),
+    };
+    if empty {
+        return Ok(None);
+    }
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let mut name = run_dir.as_os_str().to_owned();
+    name.push(format!(".old-{secs}"));
+    let old = std::path::PathBuf::from(name);
+    if old.exists() {
+        bail!(
+            "cannot move {} aside: {} already exists",
+            run_dir.display(),
+            old.display()
+        );
+    }
+    std::fs::rename(run_dir, &old)
+        .with_context(|| format!("moving {} to {}", run_dir.display(), old.display()))?;
+    Ok(Some(old))
 }

@@ -5,7 +5,6 @@
 
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use iceoryx2::prelude::*;
 use learner::Learner;
 use protocol::transport::{Ipc, ValuePublisher};
@@ -27,7 +26,8 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let task = task_info(config)?;
     let layout = task.layout;
     let mut coverage = CoverageTracker::new(config, layout)?;
-    let mut learner = Learner::with_episode_length(config, task.dims, task.episode_length, config.run.seed).context("building the learner")?;
+    let mut learner = crate::run::open_learner(ctx, task.dims, task.episode_length)?;
+    let mut checkpoints = crate::run::CheckpointTimer::new(config);
     let node = node(ctx, "learner")?;
     let channels = Channels::new(config, &ctx.run_id, &layout);
     let trajectories = channels.trajectory_subscriber(&node)?;
@@ -65,11 +65,13 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         if metrics.due() {
             metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner, &coverage));
         }
+        checkpoints.tick(ctx, &learner);
     };
     // Actors are stopped first; whatever they sent is in our buffer: take it before leaving.
     ingest_all(&mut learner, &mut coverage, &trajectories);
     metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner, &coverage));
     tracing::info!(reason, "learner stopping");
+    crate::run::final_checkpoint(ctx, &mut learner)?;
     write_final_status(ctx, &learner, reason)
 }
 

@@ -1,0 +1,254 @@
+//! Resume system tests: the real `asi` binary on `configs/smoke.toml`, each run in its own
+//! folder with its own run id and a watchdog. A stopped run started again in the same folder
+//! resumes from its checkpoint (counters continue, nothing restarts from 0); a checkpoint of
+//! another config is refused before anything starts.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+/// Upper bound for one smoke run on a loaded 2-core machine; past it the run is killed.
+const WATCHDOG: Duration = Duration::from_secs(600);
+
+/// A unique run folder, removed at the end of the test.
+struct RunDir(PathBuf);
+
+impl RunDir {
+    fn new(test: &str) -> RunDir {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos();
+        RunDir(
+            std::env::temp_dir().join(format!("asi-resume-{test}-{}-{nanos}", std::process::id())),
+        )
+    }
+
+    fn status(&self, process: &str) -> Value {
+        let path = self.0.join("status").join(format!("{process}.json"));
+        let text =
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        serde_json::from_str(&text).unwrap()
+    }
+
+    fn checkpoints(&self) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(self.0.join("checkpoints"))
+            .map(|d| {
+                d.flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .collect()
+            })
+            .unwrap_or_default();
+        names.retain(|n| n.starts_with("ckpt-"));
+        names.sort();
+        names
+    }
+}
+
+impl Drop for RunDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Runs `asi train` on the smoke config in `dir` to its end (unique run name), killing it at
+/// the watchdog; returns its output.
+fn train(dir: &RunDir, extra: &[&str]) -> Output {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    let name = format!("run.name=r{}", nanos % 1_000_000_000);
+    let dir_arg = dir.0.to_string_lossy().into_owned();
+    let mut args = vec![
+        "train",
+        "--config",
+        "configs/smoke.toml",
+        "--actors",
+        "2",
+        "--run-dir",
+        &dir_arg,
+    ];
+    args.extend(["--set", &name]);
+    args.extend(extra);
+    let child = Command::new(env!("CARGO_BIN_EXE_asi"))
+        .args(&args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("asi starts");
+    wait_with_watchdog(child, &dir.0)
+}
+
+fn wait_with_watchdog(mut child: Child, dir: &Path) -> Output {
+    let deadline = Instant::now() + WATCHDOG;
+    while child.try_wait().unwrap().is_none() {
+        if Instant::now() > deadline {
+            kill_children(dir);
+            let _ = child.kill();
+            panic!(
+                "watchdog: run in {} did not finish within {WATCHDOG:?}",
+                dir.display()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// SIGKILLs every process of the run that wrote a pid file.
+fn kill_children(dir: &Path) {
+    let pids = std::fs::read_dir(dir.join("status"))
+        .map(|d| d.flatten().collect::<Vec<_>>())
+        .unwrap_or_default();
+    for entry in pids {
+        if entry.file_name().to_string_lossy().ends_with(".pid") {
+            if let Ok(pid) = std::fs::read_to_string(entry.path())
+                .unwrap_or_default()
+                .trim()
+                .parse::<i32>()
+            {
+                // SAFETY: plain syscall on a pid of this run.
+                unsafe { libc::kill(pid, libc::SIGKILL) };
+            }
+        }
+    }
+}
+
+fn as_u64(v: &Value, key: &str) -> u64 {
+    v.get(key)
+        .and_then(Value::as_u64)
+        .unwrap_or_else(|| panic!("`{key}` missing in {v}"))
+}
+
+/// `learner/ingest/env_steps` of every metrics line, in file order.
+fn env_steps_per_line(dir: &Path) -> Vec<u64> {
+    std::fs::read_to_string(dir.join("metrics.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter_map(|v| v.get("learner/ingest/env_steps").and_then(Value::as_f64))
+        .map(|s| s as u64)
+        .collect()
+}
+
+#[test]
+fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = RunDir::new("process");
+    let first = train(&dir, &["--set", "run.max_episodes=6"]);
+    assert!(
+        first.status.success(),
+        "first launch: {}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    assert_eq!(
+        dir.checkpoints(),
+        ["ckpt-000001"],
+        "the clean stop wrote a checkpoint"
+    );
+    let before = dir.status("learner");
+    let (steps, updates) = (as_u64(&before, "env_steps"), as_u64(&before, "updates_low"));
+    assert!(steps > 0 && updates > 0, "{before}");
+    let lines_before = env_steps_per_line(&dir.0).len();
+
+    // The first launch overshoots its budget while it stops; give the second 6 more episodes.
+    let episodes = as_u64(&before, "episodes");
+    let budget = format!("run.max_episodes={}", episodes + 6);
+    let second = train(&dir, &["--set", &budget]);
+    assert!(
+        second.status.success(),
+        "second launch: {}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&second.stdout);
+    assert!(
+        stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
+        "{stdout}"
+    );
+    let after = dir.status("learner");
+    assert!(
+        as_u64(&after, "env_steps") > steps,
+        "env steps continued: {before} → {after}"
+    );
+    assert!(
+        as_u64(&after, "updates_low") > updates,
+        "updates continued: {before} → {after}"
+    );
+    assert!(
+        as_u64(&after, "episodes") >= episodes + 6,
+        "the budget counts both launches: {after}"
+    );
+    // The metrics file goes on, and no line of the second launch starts again from 0.
+    let lines = env_steps_per_line(&dir.0);
+    assert!(
+        lines.len() > lines_before,
+        "the second launch appended metrics"
+    );
+    assert!(
+        lines[lines_before..].iter().all(|&s| s >= steps),
+        "{lines:?}"
+    );
+    assert_eq!(dir.checkpoints(), ["ckpt-000001", "ckpt-000002"]);
+}
+
+#[test]
+fn a_serial_run_resumes_too_and_another_config_is_refused_before_starting() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = RunDir::new("serial");
+    let first = train(&dir, &["--serial", "--set", "run.max_episodes=4"]);
+    assert!(
+        first.status.success(),
+        "first launch: {}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
+    let steps = *env_steps_per_line(&dir.0).last().unwrap();
+
+    let second = train(&dir, &["--serial", "--set", "run.max_episodes=8"]);
+    assert!(
+        second.status.success(),
+        "second launch: {}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    assert!(String::from_utf8_lossy(&second.stdout).contains("resuming from checkpoint 1"));
+    let lines = env_steps_per_line(&dir.0);
+    assert!(*lines.last().unwrap() > steps, "{lines:?}");
+
+    let refused = train(&dir, &["--serial", "--set", "replay.capacity_steps=50000"]);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("another config") && stderr.contains("--restart"),
+        "{stderr}"
+    );
+
+    let restarted = train(
+        &dir,
+        &["--serial", "--restart", "--set", "run.max_episodes=2"],
+    );
+    assert!(
+        restarted.status.success(),
+        "restart: {}",
+        String::from_utf8_lossy(&restarted.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&restarted.stdout);
+    let moved = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("restarting: the previous run folder was moved to "))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let old = RunDir(PathBuf::from(moved));
+    assert_eq!(
+        old.checkpoints(),
+        ["ckpt-000001", "ckpt-000002"],
+        "the old run is kept"
+    );
+    assert!(!stdout.contains("resuming"), "{stdout}");
+    assert_eq!(dir.checkpoints(), ["ckpt-000001"], "a new run");
+}
