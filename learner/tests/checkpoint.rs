@@ -50,7 +50,10 @@ fn trained() -> Learner {
     let mut l = Learner::new(&config(), DIMS, 7).unwrap();
     play(&mut l, 0..30);
     assert!(l.low_replay().ring().total() > 256, "the low ring wrapped");
-    assert!(l.high_replay().ring().total() > 128, "the high ring wrapped");
+    assert!(
+        l.high_replay().ring().total() > 128,
+        "the high ring wrapped"
+    );
     assert!(l.phi_stats().rounds >= 2, "φ rounds ran");
     l
 }
