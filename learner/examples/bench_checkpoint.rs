@@ -33,7 +33,7 @@ fn record(t: usize, ep: u64, latent: usize, c: usize) -> StepRecord {
         goal: vec![4.0, 8.0],
         achieved_goal: vec![x, x],
         reward: -1.0,
-        decision: if t % c == 0 {
+        decision: if t.is_multiple_of(c) {
             DecisionKind::Policy
         } else {
             DecisionKind::None
