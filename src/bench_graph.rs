@@ -2,19 +2,22 @@
 //!
 //! Prints, as `name: value` lines: the rebuild time for each store size (φ re-mapping with the
 //! fused forward on `--remap-threads` threads and its FLOP rate, graph construction,
-//! visit/future-count recount — timed separately; `--candle` adds the former candle re-map), route query latency p50/p99 on the graph of the first size (capped at
+//! visit/future-count recount — timed separately; `--candle` adds the former candle re-map),
+//! route query latency p50/p99 (wall time, and the querying thread's CPU time, which leaves out
+//! preemption on a loaded machine) on the graph of the first size (capped at
 //! `graph.max_nodes` = 5,000 nodes), the time of all-pairs shortest paths (Dijkstra from every
 //! node) on that graph, and the same measurements by scipy (`scripts/bench_graph_scipy.py`,
 //! which installs scipy into its own venv) on the same graph and queries, with ratios. Without
 //! `python3` (or with `--no-python`) the scipy side is skipped with a message.
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
 use clap::Args;
-use graph_service::bench::{quantile, random_phi, synthetic_store, time_candle_map, time_rebuild, time_routes, RouteSample};
+use graph_service::bench::{
+    largest_component_fraction, quantile, random_phi, synthetic_store, time_candle_map, time_rebuild, time_routes, RouteSample,
+};
 use graph_service::dijkstra::shortest_paths;
 use graph_service::LatentGraph;
 use protocol::Config;
@@ -66,7 +69,7 @@ pub fn run(args: &BenchGraphArgs) -> anyhow::Result<()> {
         route_graph.get_or_insert(graph);
     }
     let graph = route_graph.context("no store size measured")?;
-    let samples = time_routes(&graph, args.queries, args.seed);
+    let samples = time_routes(&graph, args.queries, args.seed, Some(thread_cpu_secs));
     let ours = report_routes(&graph, &samples)?;
     if args.no_python {
         println!("scipy: skipped (--no-python)");
@@ -103,6 +106,19 @@ fn rebuild(config: &Config, size: u64, args: &BenchGraphArgs, candle: bool) -> a
     Ok(graph)
 }
 
+/// CPU time of the calling thread, seconds (`CLOCK_THREAD_CPUTIME_ID`; NaN if unreadable,
+/// which the quantiles skip).
+fn thread_cpu_secs() -> f64 {
+    let mut now = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `now` is a valid, writable timespec for the duration of the call.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut now) };
+    if rc == 0 {
+        now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9
+    } else {
+        f64::NAN
+    }
+}
+
 /// `1M`, `10M`, `250k`, or the plain number.
 fn size_label(size: u64) -> String {
     match size {
@@ -133,9 +149,17 @@ fn report_routes(graph: &LatentGraph, samples: &[RouteSample]) -> anyhow::Result
     println!("route_nodes: {}", graph.n_nodes());
     println!("route_edges: {}", graph.n_edges());
     println!("route_queries: {}", samples.len());
-    println!("route_reachable_queries: {}", samples.iter().filter(|s| s.distance.is_some()).count());
+    let reachable = samples.iter().filter(|s| s.distance.is_some()).count();
+    println!("route_largest_component_fraction: {:.4}", largest_component_fraction(graph));
+    println!("route_reachable_queries: {reachable}");
+    println!("route_reachable_fraction: {:.4}", reachable as f64 / samples.len() as f64);
     println!("route_p50_us: {p50_us:.1}");
     println!("route_p99_us: {p99_us:.1}");
+    let cpu_micros: Vec<f64> = samples.iter().filter_map(|s| s.cpu_secs).map(|s| s * 1e6).collect();
+    if let (Some(p50), Some(p99)) = (quantile(&cpu_micros, 0.5), quantile(&cpu_micros, 0.99)) {
+        println!("route_cpu_p50_us: {p50:.1}");
+        println!("route_cpu_p99_us: {p99:.1}");
+    }
     println!("all_pairs_reachable_pairs: {reachable_pairs}");
     println!("all_pairs_secs: {all_pairs_secs:.3}");
     Ok(Ours { p50_us, p99_us, all_pairs_secs })

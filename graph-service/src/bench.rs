@@ -5,9 +5,10 @@
 //! observation space; each episode starts at a uniform point of a square xy region and random
 //! walks (uniform steps of ±`XY_STEP` in x and y, ±`JOINT_STEP` in the other dimensions). A
 //! random-init φ maps such walks into a handful of cells, which would make the graph trivial,
-//! so the graph is built from the walks' xy (what a trained φ resembles: the region spans about
-//! `REGION_CELLS`² cells of the default side 2, more than the default cap of 5,000 nodes). The
-//! φ re-mapping is timed with the real encoder of the default config on the same observations.
+//! so the graph is built from the walks' xy (what a trained φ resembles: a region of about
+//! `REGION_CELLS`² cells of the default side 2, covered densely enough by the walks that the
+//! graph is one connected component of about 5,000 nodes, the default cap). The φ re-mapping is
+//! timed with the real encoder of the default config on the same observations.
 //!
 //! A rebuild is what [`crate::GraphService::load_weights`] does: re-map every stored state
 //! (the fused forward of [`crate::fused`] on `graph.remap_threads` threads), rebuild the graph,
@@ -38,7 +39,9 @@ const XY_STEP: f32 = 0.5;
 /// Largest step of the other observation dimensions per env step.
 const JOINT_STEP: f32 = 0.05;
 /// Side of the square start region, in cells of the config's graph grid.
-const REGION_CELLS: f32 = 100.0;
+/// 63 makes the 1 M-step store one connected graph of 4,964 nodes (seed 0), just under the
+/// default cap of 5,000 (64 already drops cells, 75 leaves 1 % outside the largest component).
+pub const REGION_CELLS: f32 = 63.0;
 
 /// Timings of one rebuild.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,8 +70,20 @@ pub fn synthetic_store(
     episode_len: usize,
     seed: u64,
 ) -> TrajectoryStore {
+    synthetic_store_in(config, obs_dim, n_steps, episode_len, seed, REGION_CELLS)
+}
+
+/// [`synthetic_store`] with walks starting in a square of `region_cells` cells a side.
+fn synthetic_store_in(
+    config: &Config,
+    obs_dim: usize,
+    n_steps: u64,
+    episode_len: usize,
+    seed: u64,
+    region_cells: f32,
+) -> TrajectoryStore {
     let mut rng = Pcg64::seed_from_u64(seed);
-    let region = REGION_CELLS * config.graph.cell_size as f32;
+    let region = region_cells * config.graph.cell_size as f32;
     let per_episode = (episode_len + 1) as u64;
     let mut store = TrajectoryStore::new(obs_dim, n_steps.max(per_episode));
     for episode in 0..n_steps.div_ceil(per_episode) {
@@ -201,11 +216,20 @@ pub struct RouteSample {
     pub distance: Option<u64>,
     /// Wall time of the query, seconds.
     pub secs: f64,
+    /// CPU time of the querying thread during the query, seconds (`None` without a clock):
+    /// unlike the wall time, it leaves out time the thread spent descheduled.
+    pub cpu_secs: Option<f64>,
 }
 
 /// Times `n_queries` routes between uniformly random node pairs of `graph` (seeded), each
 /// the full query the service runs ([`route_between`]: Dijkstra and path recovery).
-pub fn time_routes(graph: &LatentGraph, n_queries: usize, seed: u64) -> Vec<RouteSample> {
+/// `thread_cpu_secs`, if given, reads the calling thread's CPU time in seconds.
+pub fn time_routes(
+    graph: &LatentGraph,
+    n_queries: usize,
+    seed: u64,
+    thread_cpu_secs: Option<fn() -> f64>,
+) -> Vec<RouteSample> {
     let mut rng = Pcg64::seed_from_u64(seed);
     let n = graph.n_nodes() as NodeId;
     if n == 0 {
@@ -214,18 +238,52 @@ pub fn time_routes(graph: &LatentGraph, n_queries: usize, seed: u64) -> Vec<Rout
     (0..n_queries)
         .map(|_| {
             let (from, to) = (rng.random_range(0..n), rng.random_range(0..n));
+            let cpu_start = thread_cpu_secs.map(|clock| clock());
             let start = Instant::now();
             let route = route_between(graph, from, to);
             let secs = start.elapsed().as_secs_f64();
+            let cpu_secs = thread_cpu_secs
+                .zip(cpu_start)
+                .map(|(clock, begin)| clock() - begin);
             let distance = route.ok().map(|nodes| path_weight(graph, &nodes));
             RouteSample {
                 from,
                 to,
                 distance,
                 secs,
+                cpu_secs,
             }
         })
         .collect()
+}
+
+/// Fraction of the nodes in the largest connected component (0 for an empty graph).
+pub fn largest_component_fraction(graph: &LatentGraph) -> f64 {
+    let n = graph.n_nodes();
+    let mut component = vec![usize::MAX; n];
+    let mut largest = 0;
+    for root in 0..n {
+        if component[root] != usize::MAX {
+            continue;
+        }
+        component[root] = root;
+        let (mut stack, mut size) = (vec![root], 0);
+        while let Some(u) = stack.pop() {
+            size += 1;
+            for &(v, _) in &graph.adjacency()[u] {
+                if component[v as usize] == usize::MAX {
+                    component[v as usize] = root;
+                    stack.push(v as usize);
+                }
+            }
+        }
+        largest = largest.max(size);
+    }
+    if n == 0 {
+        0.0
+    } else {
+        largest as f64 / n as f64
+    }
 }
 
 /// Sum of the edge weights along `nodes`.
@@ -266,11 +324,40 @@ mod tests {
             timing.n_edges >= timing.n_nodes - timing.n_trajectories,
             "{timing:?}"
         );
-        let samples = time_routes(&graph, 50, 3);
+        let samples = time_routes(&graph, 50, 3, None);
         assert_eq!(samples.len(), 50);
         for s in samples.iter().filter(|s| s.from == s.to) {
             assert_eq!(s.distance, Some(0));
         }
+    }
+
+    #[test]
+    fn the_bench_store_of_1m_steps_builds_one_connected_graph_of_about_5000_nodes() {
+        let config = Config::default();
+        let store = synthetic_store(&config, 29, 1_000_000, 500, 0);
+        let grid = Grid::new(config.graph.cell_size, config.graph.node_position);
+        let mut builder = GraphBuilder::new(grid, config.graph.max_nodes, config.graph.edge_window);
+        for trajectory in store.trajectories() {
+            builder.add_trajectory(trajectory.latents());
+        }
+        let graph = builder.finish();
+        assert!(
+            (4_500..=5_000).contains(&graph.n_nodes()),
+            "{} nodes",
+            graph.n_nodes()
+        );
+        assert_eq!(largest_component_fraction(&graph), 1.0);
+    }
+
+    #[test]
+    fn the_largest_component_fraction_counts_nodes() {
+        let grid = Grid::new(1.0, protocol::config::NodePosition::Corner);
+        let mut builder = GraphBuilder::new(grid, 100, 1);
+        builder.add_trajectory(&[[0.5, 0.5], [1.5, 0.5], [2.5, 0.5]]);
+        builder.add_trajectory(&[[10.5, 0.5]]);
+        assert_eq!(largest_component_fraction(&builder.finish()), 0.75);
+        let empty = GraphBuilder::new(grid, 100, 1).finish();
+        assert_eq!(largest_component_fraction(&empty), 0.0);
     }
 
     #[test]

@@ -231,12 +231,12 @@ mod tests {
     }
 
     fn adjacency(n: usize, edges: &[(u32, u32, u32)]) -> Adjacency {
-        let mut adj: Adjacency = vec![Vec::new(); n];
+        let mut lists = vec![Vec::new(); n];
         for &(a, b, w) in edges {
-            adj[a as usize].push((b, w));
-            adj[b as usize].push((a, w));
+            lists[a as usize].push((b, w));
+            lists[b as usize].push((a, w));
         }
-        adj
+        Adjacency::from_lists(&lists)
     }
 
     /// A random graph: up to 12 nodes, up to 30 edges (parallel edges and self loops allowed).
@@ -297,6 +297,7 @@ mod tests {
     #[test]
     fn a_source_outside_the_graph_reaches_nothing() {
         let paths = shortest_paths(&adjacency(2, &[(0, 1, 1)]), 5);
+        assert_eq!(adjacency(2, &[(0, 1, 1)]).get(5), None);
         assert_eq!(paths.distances(), &[None, None]);
         assert_eq!(paths.path_to(0), None);
     }

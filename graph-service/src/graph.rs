@@ -29,8 +29,54 @@ pub type NodeId = u32;
 /// Weight of an edge: a temporal distance in env steps.
 pub type EdgeWeight = u32;
 
-/// Neighbour lists: `adjacency[u]` = `(v, weight)` pairs.
-pub type Adjacency = Vec<Vec<(NodeId, EdgeWeight)>>;
+/// Neighbour lists in one flat array (compressed sparse rows): `adjacency[u]` is the slice of
+/// `(v, weight)` pairs of node `u`. One allocation and no pointer per node, so a search reads
+/// neighbours from contiguous memory.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Adjacency {
+    /// `offsets[u]..offsets[u + 1]` indexes `arcs` for node `u`; `n + 1` entries.
+    offsets: Vec<usize>,
+    arcs: Vec<(NodeId, EdgeWeight)>,
+}
+
+impl Adjacency {
+    /// From one list per node (in node order; each list kept in its order).
+    pub fn from_lists(lists: &[Vec<(NodeId, EdgeWeight)>]) -> Self {
+        let mut offsets = Vec::with_capacity(lists.len() + 1);
+        offsets.push(0);
+        let mut arcs = Vec::with_capacity(lists.iter().map(Vec::len).sum());
+        for list in lists {
+            arcs.extend_from_slice(list);
+            offsets.push(arcs.len());
+        }
+        Self { offsets, arcs }
+    }
+
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// True when there are no nodes.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The neighbours of `u`, `None` if `u` is not a node.
+    pub fn get(&self, u: usize) -> Option<&[(NodeId, EdgeWeight)]> {
+        let (&start, &end) = (self.offsets.get(u)?, self.offsets.get(u + 1)?);
+        self.arcs.get(start..end)
+    }
+}
+
+impl std::ops::Index<usize> for Adjacency {
+    type Output = [(NodeId, EdgeWeight)];
+
+    /// The neighbours of `u`; panics if `u` is not a node (callers check `u < len()`).
+    fn index(&self, u: usize) -> &Self::Output {
+        &self.arcs[self.offsets[u]..self.offsets[u + 1]]
+    }
+}
 
 /// An immutable latent graph (rebuilt, never edited).
 #[derive(Debug, Clone)]
@@ -197,14 +243,15 @@ impl GraphBuilder {
             .map(|((a, b), w)| (a, b, w))
             .collect();
         edges.sort_unstable();
-        let mut adjacency: Adjacency = vec![Vec::new(); self.keys.len()];
+        let mut lists = vec![Vec::new(); self.keys.len()];
         for &(a, b, w) in &edges {
-            adjacency[a as usize].push((b, w));
-            adjacency[b as usize].push((a, w));
+            lists[a as usize].push((b, w));
+            lists[b as usize].push((a, w));
         }
-        for list in &mut adjacency {
+        for list in &mut lists {
             list.sort_unstable();
         }
+        let adjacency = Adjacency::from_lists(&lists);
         LatentGraph {
             grid: self.grid,
             keys: self.keys,
