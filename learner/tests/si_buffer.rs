@@ -127,3 +127,38 @@ fn only_direct_and_frontier_routes_long_enough_are_usable() {
         "non-finite points are refused"
     );
 }
+
+#[test]
+fn a_buffer_rebuilt_from_its_parts_is_the_same_and_bad_parts_are_refused() {
+    let mut b = SiBuffer::new(3, 2, 4);
+    for ep in 0..3 {
+        let e = b.begin_episode(&obs(10.0 * ep as f32)).unwrap();
+        for t in 0..2 {
+            b.push(
+                e,
+                &obs(10.0 * ep as f32 + t as f32 + 1.0),
+                &[ep as f32, 0.0],
+            );
+        }
+    }
+    assert_eq!(
+        b.n_evicted(),
+        2,
+        "the fifth and sixth pushes each evicted a quarter of 4"
+    );
+    let copy = SiBuffer::from_parts(3, 2, 4, b.parts()).unwrap();
+    assert_eq!(copy.parts(), b.parts());
+    for i in 0..b.len() {
+        assert_eq!(copy.get(i), b.get(i));
+    }
+    // An entry whose episode start is not held, and wrong lengths, are refused.
+    let mut parts = b.parts();
+    let bad_episode = [0u64, 0, 0, 0];
+    parts.episode = &bad_episode;
+    let err = SiBuffer::from_parts(3, 2, 4, parts).unwrap_err();
+    assert!(err.contains("no start"), "{err}");
+    let err = SiBuffer::from_parts(4, 2, 4, b.parts()).unwrap_err();
+    assert!(err.contains("obs"), "{err}");
+    let err = SiBuffer::from_parts(3, 2, 2, b.parts()).unwrap_err();
+    assert!(err.contains("capacity"), "{err}");
+}

@@ -19,6 +19,9 @@
 //! they are counted in [`SiBuffer::n_orphaned`], not stored.
 //!
 //! Sampling: uniform, without replacement ([`SiBuffer::sample`]).
+//!
+//! Checkpoints: [`SiBuffer::parts`] borrows everything a checkpoint must hold;
+//! [`SiBuffer::from_parts`] rebuilds the buffer from it and checks its consistency.
 
 use rand::Rng;
 
@@ -35,6 +38,31 @@ pub struct SiEntry<'a> {
     pub obs: &'a [f32],
     /// The env goal (xy).
     pub goal: &'a [f32],
+}
+
+/// Everything an [`SiBuffer`] holds, borrowed (for checkpoints). Entry `i` is
+/// `obs[i·obs_dim..]`, `goal[i·goal_dim..]`, `episode[i]`; episode `e`'s start is
+/// `starts[(e − first_start)·obs_dim..]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SiBufferParts<'a> {
+    /// s_t of every entry, oldest first.
+    pub obs: &'a [f32],
+    /// Goal of every entry.
+    pub goal: &'a [f32],
+    /// Episode serial of every entry.
+    pub episode: &'a [u64],
+    /// Start observations of the episodes `first_start..next_episode`.
+    pub starts: &'a [f32],
+    /// Serial of the first start held.
+    pub first_start: u64,
+    /// Serial the next episode gets.
+    pub next_episode: u64,
+    /// Counters: evicted entries, orphaned steps, refused input.
+    pub evicted: u64,
+    /// See [`SiBuffer::n_orphaned`].
+    pub orphaned: u64,
+    /// See [`SiBuffer::n_rejected`].
+    pub rejected: u64,
 }
 
 /// The SI buffer. See the module doc.
@@ -156,6 +184,11 @@ impl SiBuffer {
         self.episode.is_empty()
     }
 
+    /// `(obs_dim, goal_dim)`: the sizes of s_t (and s_0) and of g.
+    pub fn dims(&self) -> (usize, usize) {
+        (self.obs_dim, self.goal_dim)
+    }
+
     /// Most entries held.
     pub fn capacity(&self) -> usize {
         self.capacity
@@ -189,6 +222,81 @@ impl SiBuffer {
             s0: self.starts.get(start..start + self.obs_dim)?,
             obs: &self.obs[i * self.obs_dim..(i + 1) * self.obs_dim],
             goal: &self.goal[i * self.goal_dim..(i + 1) * self.goal_dim],
+        })
+    }
+
+    /// Everything the buffer holds, borrowed (for checkpoints).
+    pub fn parts(&self) -> SiBufferParts<'_> {
+        SiBufferParts {
+            obs: &self.obs,
+            goal: &self.goal,
+            episode: &self.episode,
+            starts: &self.starts,
+            first_start: self.first_start,
+            next_episode: self.next_episode,
+            evicted: self.evicted,
+            orphaned: self.orphaned,
+            rejected: self.rejected,
+        }
+    }
+
+    /// A buffer of the given sizes holding `parts` (from [`Self::parts`]); `Err` names the
+    /// first inconsistency (lengths, more entries than `capacity`, an entry whose episode has
+    /// no start).
+    pub fn from_parts(
+        obs_dim: usize,
+        goal_dim: usize,
+        capacity: usize,
+        parts: SiBufferParts<'_>,
+    ) -> Result<Self, String> {
+        let n = parts.episode.len();
+        let n_starts = parts.next_episode.checked_sub(parts.first_start);
+        let problem = if parts.obs.len() != n * obs_dim || parts.goal.len() != n * goal_dim {
+            Some(format!(
+                "{n} entries need {} obs and {} goal values, got {} and {}",
+                n * obs_dim,
+                n * goal_dim,
+                parts.obs.len(),
+                parts.goal.len()
+            ))
+        } else if n > capacity.max(1) {
+            Some(format!("{n} entries exceed the capacity {capacity}"))
+        } else if n_starts.is_none_or(|k| parts.starts.len() as u64 != k * obs_dim as u64) {
+            Some(format!(
+                "starts of episodes {}..{} need {} values each, got {} values",
+                parts.first_start,
+                parts.next_episode,
+                obs_dim,
+                parts.starts.len()
+            ))
+        } else if let Some(e) = parts
+            .episode
+            .iter()
+            .find(|&&e| e < parts.first_start || e >= parts.next_episode)
+        {
+            Some(format!(
+                "an entry of episode {e} has no start (held: {}..{})",
+                parts.first_start, parts.next_episode
+            ))
+        } else {
+            None
+        };
+        if let Some(problem) = problem {
+            return Err(format!("SI buffer: {problem}"));
+        }
+        Ok(Self {
+            obs_dim,
+            goal_dim,
+            capacity: capacity.max(1),
+            obs: parts.obs.to_vec(),
+            goal: parts.goal.to_vec(),
+            episode: parts.episode.to_vec(),
+            starts: parts.starts.to_vec(),
+            first_start: parts.first_start,
+            next_episode: parts.next_episode,
+            evicted: parts.evicted,
+            orphaned: parts.orphaned,
+            rejected: parts.rejected,
         })
     }
 

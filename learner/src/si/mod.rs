@@ -22,7 +22,7 @@ pub mod losses;
 pub mod routes;
 pub mod step;
 
-pub use buffer::{EpisodeRef, SiBuffer, SiEntry};
+pub use buffer::{EpisodeRef, SiBuffer, SiBufferParts, SiEntry};
 pub use indices::{reference_indices, target_index, MIN_HIGH_ROUTE_LEN, MIN_LOW_ROUTE_LEN};
 pub use losses::{high_si_loss, low_si_loss, SiLossStats};
 pub use routes::{NoRouteSource, RouteSource, RoutesReply};

@@ -220,6 +220,28 @@ impl SelfImitation {
         self.pending
     }
 
+    /// Replaces the buffer, the due rounds and the counters (checkpoint restore). `Err` when
+    /// the buffer's sizes differ from this learner's.
+    pub fn restore(
+        &mut self,
+        buffer: SiBuffer,
+        pending: u64,
+        stats: SiStats,
+    ) -> Result<(), String> {
+        if buffer.dims() != (self.obs_dim, self.goal_dim) {
+            return Err(format!(
+                "SI buffer sizes {:?} do not match obs_dim {} / goal_dim {}",
+                buffer.dims(),
+                self.obs_dim,
+                self.goal_dim
+            ));
+        }
+        self.buffer = buffer;
+        self.pending = pending;
+        self.stats = stats;
+        Ok(())
+    }
+
     /// Notes the end of a training episode; `train_episodes` is the run-wide count including it.
     /// Past `si_start_episode` a round falls due (or, with SI off, its two steps are counted as
     /// skipped).
