@@ -249,41 +249,7 @@ impl SiBuffer {
         capacity: usize,
         parts: SiBufferParts<'_>,
     ) -> Result<Self, String> {
-        let n = parts.episode.len();
-        let n_starts = parts.next_episode.checked_sub(parts.first_start);
-        let problem = if parts.obs.len() != n * obs_dim || parts.goal.len() != n * goal_dim {
-            Some(format!(
-                "{n} entries need {} obs and {} goal values, got {} and {}",
-                n * obs_dim,
-                n * goal_dim,
-                parts.obs.len(),
-                parts.goal.len()
-            ))
-        } else if n > capacity.max(1) {
-            Some(format!("{n} entries exceed the capacity {capacity}"))
-        } else if n_starts.is_none_or(|k| parts.starts.len() as u64 != k * obs_dim as u64) {
-            Some(format!(
-                "starts of episodes {}..{} need {} values each, got {} values",
-                parts.first_start,
-                parts.next_episode,
-                obs_dim,
-                parts.starts.len()
-            ))
-        } else if let Some(e) = parts
-            .episode
-            .iter()
-            .find(|&&e| e < parts.first_start || e >= parts.next_episode)
-        {
-            Some(format!(
-                "an entry of episode {e} has no start (held: {}..{})",
-                parts.first_start, parts.next_episode
-            ))
-        } else {
-            None
-        };
-        if let Some(problem) = problem {
-            return Err(format!("SI buffer: {problem}"));
-        }
+        check_parts(obs_dim, goal_dim, capacity, &parts).map_err(|p| format!("SI buffer: {p}"))?;
         Ok(Self {
             obs_dim,
             goal_dim,
@@ -304,5 +270,44 @@ impl SiBuffer {
     pub fn sample(&self, rng: &mut impl Rng, n: usize) -> Vec<usize> {
         let amount = n.min(self.len());
         rand::seq::index::sample(rng, self.len(), amount).into_vec()
+    }
+}
+
+/// The first inconsistency of `parts` for the given sizes, if any.
+fn check_parts(
+    obs_dim: usize,
+    goal_dim: usize,
+    capacity: usize,
+    parts: &SiBufferParts<'_>,
+) -> Result<(), String> {
+    let n = parts.episode.len();
+    if parts.obs.len() != n * obs_dim || parts.goal.len() != n * goal_dim {
+        return Err(format!(
+            "{n} entries need {} obs and {} goal values, got {} and {}",
+            n * obs_dim,
+            n * goal_dim,
+            parts.obs.len(),
+            parts.goal.len()
+        ));
+    }
+    if n > capacity.max(1) {
+        return Err(format!("{n} entries exceed the capacity {capacity}"));
+    }
+    let n_starts = parts.next_episode.checked_sub(parts.first_start);
+    if n_starts.is_none_or(|k| parts.starts.len() as u64 != k * obs_dim as u64) {
+        return Err(format!(
+            "starts of episodes {}..{} need {} values each, got {} values",
+            parts.first_start,
+            parts.next_episode,
+            obs_dim,
+            parts.starts.len()
+        ));
+    }
+    let held = parts.first_start..parts.next_episode;
+    match parts.episode.iter().find(|e| !held.contains(e)) {
+        Some(e) => Err(format!(
+            "an entry of episode {e} has no start (held: {held:?})"
+        )),
+        None => Ok(()),
     }
 }
