@@ -294,6 +294,22 @@ mod tests {
         }
     }
 
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+        #[test]
+        fn early_exit_paths_equal_full_dijkstra_paths_on_larger_graphs(
+            edges in proptest::collection::vec((0u32..300, 0u32..300, 1u32..6), 200..900),
+            pairs in proptest::collection::vec((0u32..300, 0u32..300), 20),
+        ) {
+            let adj = adjacency(300, &edges);
+            for (source, target) in pairs {
+                let full = shortest_paths(&adj, source);
+                prop_assert_eq!(shortest_path_to(&adj, source, target), full.path_to(target));
+            }
+        }
+    }
+
     #[test]
     fn a_source_outside_the_graph_reaches_nothing() {
         let paths = shortest_paths(&adjacency(2, &[(0, 1, 1)]), 5);
