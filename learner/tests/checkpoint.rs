@@ -96,11 +96,15 @@ fn a_restored_learner_writes_the_same_files_and_trains_on_exactly_like_the_origi
             "low row {i}"
         );
     }
+    let si_len = original.self_imitation().buffer().len();
+    assert!(si_len > 0, "the SI buffer holds entries");
+    assert_eq!(restored.self_imitation().buffer().len(), si_len);
+    assert_eq!(restored.si_pending(), original.si_pending());
     assert_eq!(restored.low_replay().ring(), original.low_replay().ring());
     assert_eq!(restored.high_replay().ring(), original.high_replay().ring());
 
-    // Every file — weights, Adam moments, buffers, φ store, counters and generators — is
-    // written again byte for byte by the restored learner.
+    // Every file — weights, Adam moments, buffers, φ store, SI buffer, counters and
+    // generators — is written again byte for byte by the restored learner.
     let again = restored
         .save_checkpoint(&config(), &scratch("round-trip-again"))
         .unwrap();

@@ -11,6 +11,7 @@
 //! | `optim.safetensors` | Adam m and v of every optimiser, log α; step counts in metadata |
 //! | `replay_low.safetensors`, `replay_high.safetensors` | buffer columns, rows `0..len`; ring in metadata |
 //! | `phi_store.safetensors` | φ store runs (observations, priorities); run lengths and stats in metadata |
+//! | `si.safetensors` | self-imitation buffer (entries, episode serials, start states); due rounds and counters in metadata |
 //! | `state.json` | counters, publication bookkeeping, schedule, generators, φ trainer scalars |
 //! | `manifest.json` | format and protocol versions, layout hash, config fingerprint, size and checksum of each file above |
 //!
@@ -23,8 +24,8 @@
 //! - Taken between φ rounds only ([`CheckpointError::RoundActive`]): a round's sampling state
 //!   is not saved, so the φ store is thawed and holds no staged run when one is written.
 //! - Not saved (by design): the open episodes of the ingest (a resumed run starts new
-//!   episodes; chunks of old ones are counted as lost), the last update's loss statistics and
-//!   timing telemetry (metrics only).
+//!   episodes; chunks of old ones are counted as lost), the last update's loss statistics
+//!   (SAC and SI) and timing telemetry (metrics only).
 //!
 //! Extension: a new piece of state adds one [`Part`] to [`PARTS`] — a file name, a function
 //! that serialises it and one that restores it into a fresh learner.
@@ -46,6 +47,7 @@ use crate::error::LearnerError;
 use crate::ingest::Episodes;
 use crate::phi::store::StoreStats;
 use crate::replay::{Column, Ring};
+use crate::si::{SiBuffer, SiBufferParts, SiStats};
 use nets::TaskDims;
 
 /// Version of the checkpoint format; a checkpoint of another version is refused.
@@ -299,6 +301,11 @@ const PARTS: &[Part] = &[
         restore: restore_phi_store,
     },
     Part {
+        file: "si.safetensors",
+        save: save_si,
+        restore: restore_si,
+    },
+    Part {
         file: "state.json",
         save: |l| serde_json::to_vec_pretty(&State::of(l)).map_err(|e| e.to_string()),
         restore: |l, b| {
@@ -532,6 +539,14 @@ fn to_safetensors(
         .map(|(name, shape, data)| Tensor::from_vec(data, shape, &Device::Cpu).map(|t| (name, t)))
         .collect::<candle_core::Result<Vec<_>>>()
         .map_err(|e| e.to_string())?;
+    serialize(tensors, metadata)
+}
+
+/// Safetensors bytes of named tensors with string metadata.
+fn serialize(
+    tensors: Vec<(String, Tensor)>,
+    metadata: HashMap<String, String>,
+) -> Result<Vec<u8>, String> {
     // One metadata entry holding sorted JSON: safetensors writes its metadata map in hash
     // order, which would make equal states give different bytes.
     let sorted: BTreeMap<String, String> = metadata.into_iter().collect();
@@ -782,6 +797,115 @@ fn restore_phi_store(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
         physics_failures,
     };
     l.phi_store.restore(runs, stats)
+}
+
+/// The SI buffer's arrays (`obs`, `goal`, `starts` as F32, `episode` serials as I64); the
+/// serials, due rounds and counters in metadata.
+fn save_si(l: &Learner) -> Result<Vec<u8>, String> {
+    let si = &l.si;
+    let p = si.buffer().parts();
+    let st = si.stats();
+    let episode = p
+        .episode
+        .iter()
+        .map(|&e| i64::try_from(e).map_err(|_| format!("SI episode serial {e} exceeds i64")))
+        .collect::<Result<Vec<i64>, _>>()?;
+    let counters = [
+        st.rounds_due,
+        st.high_steps,
+        st.low_steps,
+        st.skipped_disabled,
+        st.skipped_no_answer,
+        st.skipped_phi_mismatch,
+        st.skipped_no_usable_route,
+        st.skipped_empty_buffer,
+    ];
+    let metadata = HashMap::from([
+        ("first_start".to_owned(), p.first_start.to_string()),
+        ("next_episode".to_owned(), p.next_episode.to_string()),
+        ("evicted".to_owned(), p.evicted.to_string()),
+        ("orphaned".to_owned(), p.orphaned.to_string()),
+        ("rejected".to_owned(), p.rejected.to_string()),
+        ("pending".to_owned(), si.pending().to_string()),
+        (
+            "stats".to_owned(),
+            serde_json::to_string(&counters).map_err(|e| e.to_string())?,
+        ),
+    ]);
+    let n = episode.len();
+    let tensors = vec![
+        f32_tensor("obs", p.obs.to_vec())?,
+        f32_tensor("goal", p.goal.to_vec())?,
+        f32_tensor("starts", p.starts.to_vec())?,
+        (
+            "episode".to_owned(),
+            Tensor::from_vec(episode, n, &Device::Cpu).map_err(|e| e.to_string())?,
+        ),
+    ];
+    serialize(tensors, metadata)
+}
+
+/// A 1-D f32 tensor named `name`.
+fn f32_tensor(name: &str, data: Vec<f32>) -> Result<(String, Tensor), String> {
+    let n = data.len();
+    Tensor::from_vec(data, n, &Device::Cpu)
+        .map(|t| (name.to_owned(), t))
+        .map_err(|e| e.to_string())
+}
+
+fn restore_si(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
+    let (st, metadata) = parse_safetensors(bytes)?;
+    let len_of = |name: &str| {
+        st.tensor(name)
+            .map(|v| v.shape().iter().product::<usize>())
+            .map_err(|_| format!("tensor `{name}` is missing"))
+    };
+    let obs = f32_array(&st, "obs", len_of("obs")?)?;
+    let goal = f32_array(&st, "goal", len_of("goal")?)?;
+    let starts = f32_array(&st, "starts", len_of("starts")?)?;
+    let view = st
+        .tensor("episode")
+        .map_err(|_| "tensor `episode` is missing".to_owned())?;
+    if view.dtype() != safetensors::Dtype::I64 {
+        return Err(format!("tensor `episode` is {:?}, not I64", view.dtype()));
+    }
+    let episode = view
+        .data()
+        .chunks_exact(8)
+        .map(|b| {
+            let v = i64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);
+            u64::try_from(v).map_err(|_| format!("negative SI episode serial {v}"))
+        })
+        .collect::<Result<Vec<u64>, _>>()?;
+    let [rounds_due, high_steps, low_steps, skipped_disabled, skipped_no_answer, skipped_phi_mismatch, skipped_no_usable_route, skipped_empty_buffer]: [u64; 8] =
+        serde_json::from_str(metadata.get("stats").ok_or("metadata `stats` is missing")?)
+            .map_err(|e| format!("metadata `stats`: {e}"))?;
+    let current = l.si.buffer();
+    let (obs_dim, goal_dim) = current.dims();
+    let parts = SiBufferParts {
+        obs: &obs,
+        goal: &goal,
+        episode: &episode,
+        starts: &starts,
+        first_start: meta(&metadata, "first_start")?,
+        next_episode: meta(&metadata, "next_episode")?,
+        evicted: meta(&metadata, "evicted")?,
+        orphaned: meta(&metadata, "orphaned")?,
+        rejected: meta(&metadata, "rejected")?,
+    };
+    let buffer = SiBuffer::from_parts(obs_dim, goal_dim, current.capacity(), parts)?;
+    let stats = SiStats {
+        rounds_due,
+        high_steps,
+        low_steps,
+        skipped_disabled,
+        skipped_no_answer,
+        skipped_phi_mismatch,
+        skipped_no_usable_route,
+        skipped_empty_buffer,
+        ..SiStats::default()
+    };
+    l.si.restore(buffer, meta(&metadata, "pending")?, stats)
 }
 
 /// `state.json`: the scalar state of the learner.
