@@ -16,7 +16,8 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use clap::Args;
 use graph_service::bench::{
-    largest_component_fraction, quantile, random_phi, synthetic_store, time_candle_map, time_rebuild, time_routes, RouteSample,
+    largest_component_fraction, quantile, random_phi, synthetic_store, time_candle_map,
+    time_rebuild, time_routes, RouteSample,
 };
 use graph_service::dijkstra::shortest_paths;
 use graph_service::LatentGraph;
@@ -53,11 +54,20 @@ pub struct BenchGraphArgs {
 }
 
 pub fn run(args: &BenchGraphArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(!args.sizes.is_empty() && args.sizes.iter().all(|&s| s > 0), "--sizes must list positive step counts");
-    anyhow::ensure!(args.episode_len > 0 && args.queries > 0, "--episode-len and --queries must be positive");
+    anyhow::ensure!(
+        !args.sizes.is_empty() && args.sizes.iter().all(|&s| s > 0),
+        "--sizes must list positive step counts"
+    );
+    anyhow::ensure!(
+        args.episode_len > 0 && args.queries > 0,
+        "--episode-len and --queries must be positive"
+    );
     let mut config = Config::default();
     if let Some(threads) = args.remap_threads {
-        anyhow::ensure!((1..=256).contains(&threads), "--remap-threads must be in [1, 256], got {threads}");
+        anyhow::ensure!(
+            (1..=256).contains(&threads),
+            "--remap-threads must be in [1, 256], got {threads}"
+        );
         config.graph.remap_threads = threads;
     }
     println!("obs_dim: {OBS_DIM}");
@@ -80,11 +90,19 @@ pub fn run(args: &BenchGraphArgs) -> anyhow::Result<()> {
 
 /// Builds a store of `size` steps, times its rebuild (and the candle re-map if `candle`),
 /// prints the figures; returns the graph.
-fn rebuild(config: &Config, size: u64, args: &BenchGraphArgs, candle: bool) -> anyhow::Result<LatentGraph> {
+fn rebuild(
+    config: &Config,
+    size: u64,
+    args: &BenchGraphArgs,
+    candle: bool,
+) -> anyhow::Result<LatentGraph> {
     let label = size_label(size);
     let start = Instant::now();
     let store = synthetic_store(config, OBS_DIM, size, args.episode_len, args.seed);
-    println!("rebuild_{label}_generate_secs: {:.3}", start.elapsed().as_secs_f64());
+    println!(
+        "rebuild_{label}_generate_secs: {:.3}",
+        start.elapsed().as_secs_f64()
+    );
     let phi = random_phi(config, OBS_DIM, args.seed)?;
     let (timing, graph) = time_rebuild(config, &store, &phi)?;
     println!("rebuild_{label}_stored_steps: {}", timing.n_steps);
@@ -94,22 +112,34 @@ fn rebuild(config: &Config, size: u64, args: &BenchGraphArgs, candle: bool) -> a
     let flop = 2.0 * phi.fused().macs_per_row() as f64 * timing.n_steps as f64;
     println!("rebuild_{label}_phi_kernel: {:?}", phi.fused().isa());
     println!("rebuild_{label}_phi_map_secs: {:.3}", timing.map_secs);
-    println!("rebuild_{label}_phi_map_gflop_per_sec: {:.1}", flop / timing.map_secs / 1e9);
+    println!(
+        "rebuild_{label}_phi_map_gflop_per_sec: {:.1}",
+        flop / timing.map_secs / 1e9
+    );
     if candle {
         let candle_secs = time_candle_map(&store, &phi)?;
         println!("rebuild_{label}_phi_map_candle_secs: {candle_secs:.3}");
-        println!("rebuild_{label}_phi_map_candle_gflop_per_sec: {:.1}", flop / candle_secs / 1e9);
+        println!(
+            "rebuild_{label}_phi_map_candle_gflop_per_sec: {:.1}",
+            flop / candle_secs / 1e9
+        );
     }
     println!("rebuild_{label}_graph_build_secs: {:.3}", timing.build_secs);
     println!("rebuild_{label}_counts_secs: {:.3}", timing.counts_secs);
-    println!("rebuild_{label}_total_secs: {:.3}", timing.map_secs + timing.build_secs + timing.counts_secs);
+    println!(
+        "rebuild_{label}_total_secs: {:.3}",
+        timing.map_secs + timing.build_secs + timing.counts_secs
+    );
     Ok(graph)
 }
 
 /// CPU time of the calling thread, seconds (`CLOCK_THREAD_CPUTIME_ID`; NaN if unreadable,
 /// which the quantiles skip).
 fn thread_cpu_secs() -> f64 {
-    let mut now = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    let mut now = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
     // SAFETY: `now` is a valid, writable timespec for the duration of the call.
     let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut now) };
     if rc == 0 {
@@ -143,33 +173,57 @@ fn report_routes(graph: &LatentGraph, samples: &[RouteSample]) -> anyhow::Result
     let start = Instant::now();
     let mut reachable_pairs = 0usize;
     for source in 0..graph.n_nodes() as u32 {
-        reachable_pairs += shortest_paths(graph.adjacency(), source).distances().iter().flatten().count();
+        reachable_pairs += shortest_paths(graph.adjacency(), source)
+            .distances()
+            .iter()
+            .flatten()
+            .count();
     }
     let all_pairs_secs = start.elapsed().as_secs_f64();
     println!("route_nodes: {}", graph.n_nodes());
     println!("route_edges: {}", graph.n_edges());
     println!("route_queries: {}", samples.len());
     let reachable = samples.iter().filter(|s| s.distance.is_some()).count();
-    println!("route_largest_component_fraction: {:.4}", largest_component_fraction(graph));
+    println!(
+        "route_largest_component_fraction: {:.4}",
+        largest_component_fraction(graph)
+    );
     println!("route_reachable_queries: {reachable}");
-    println!("route_reachable_fraction: {:.4}", reachable as f64 / samples.len() as f64);
+    println!(
+        "route_reachable_fraction: {:.4}",
+        reachable as f64 / samples.len() as f64
+    );
     println!("route_p50_us: {p50_us:.1}");
     println!("route_p99_us: {p99_us:.1}");
-    let cpu_micros: Vec<f64> = samples.iter().filter_map(|s| s.cpu_secs).map(|s| s * 1e6).collect();
+    let cpu_micros: Vec<f64> = samples
+        .iter()
+        .filter_map(|s| s.cpu_secs)
+        .map(|s| s * 1e6)
+        .collect();
     if let (Some(p50), Some(p99)) = (quantile(&cpu_micros, 0.5), quantile(&cpu_micros, 0.99)) {
         println!("route_cpu_p50_us: {p50:.1}");
         println!("route_cpu_p99_us: {p99:.1}");
     }
     println!("all_pairs_reachable_pairs: {reachable_pairs}");
     println!("all_pairs_secs: {all_pairs_secs:.3}");
-    Ok(Ours { p50_us, p99_us, all_pairs_secs })
+    Ok(Ours {
+        p50_us,
+        p99_us,
+        all_pairs_secs,
+    })
 }
 
 /// Runs the scipy script on the same graph and queries and prints its figures and the ratios.
-fn compare_with_scipy(graph: &LatentGraph, samples: &[RouteSample], ours: &Ours) -> anyhow::Result<()> {
+fn compare_with_scipy(
+    graph: &LatentGraph,
+    samples: &[RouteSample],
+    ours: &Ours,
+) -> anyhow::Result<()> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join(SCIPY_SCRIPT);
     if Command::new("python3").arg("--version").output().is_err() {
-        println!("scipy: skipped (python3 not found on PATH; install Python 3 to compare with scipy)");
+        println!(
+            "scipy: skipped (python3 not found on PATH; install Python 3 to compare with scipy)"
+        );
         return Ok(());
     }
     let dir = temp_dir()?;
@@ -182,21 +236,43 @@ fn compare_with_scipy(graph: &LatentGraph, samples: &[RouteSample], ours: &Ours)
             return Ok(());
         }
     };
-    let field = |key: &str| scipy.get(key).and_then(serde_json::Value::as_f64).with_context(|| format!("`{key}` missing in {scipy}"));
+    let field = |key: &str| {
+        scipy
+            .get(key)
+            .and_then(serde_json::Value::as_f64)
+            .with_context(|| format!("`{key}` missing in {scipy}"))
+    };
     let (p50, p99, all_pairs) = (field("p50_us")?, field("p99_us")?, field("all_pairs_secs")?);
-    println!("scipy_version: {}", scipy.get("scipy_version").and_then(serde_json::Value::as_str).unwrap_or("?"));
-    println!("scipy_distances_agree: {}", scipy.get("distances_agree").and_then(serde_json::Value::as_bool).unwrap_or(false));
+    println!(
+        "scipy_version: {}",
+        scipy
+            .get("scipy_version")
+            .and_then(serde_json::Value::as_str)
+            .unwrap_or("?")
+    );
+    println!(
+        "scipy_distances_agree: {}",
+        scipy
+            .get("distances_agree")
+            .and_then(serde_json::Value::as_bool)
+            .unwrap_or(false)
+    );
     println!("scipy_route_p50_us: {p50:.1}");
     println!("scipy_route_p99_us: {p99:.1}");
     println!("scipy_all_pairs_secs: {all_pairs:.3}");
     println!("route_p50_ratio_scipy_over_ours: {:.2}", p50 / ours.p50_us);
     println!("route_p99_ratio_scipy_over_ours: {:.2}", p99 / ours.p99_us);
-    println!("all_pairs_ratio_scipy_over_ours: {:.2}", all_pairs / ours.all_pairs_secs);
+    println!(
+        "all_pairs_ratio_scipy_over_ours: {:.2}",
+        all_pairs / ours.all_pairs_secs
+    );
     Ok(())
 }
 
 fn temp_dir() -> anyhow::Result<PathBuf> {
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_nanos();
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)?
+        .as_nanos();
     let dir = std::env::temp_dir().join(format!("asi-bench-graph-{}-{nanos}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     Ok(dir)
@@ -212,7 +288,14 @@ fn write_inputs(dir: &Path, graph: &LatentGraph, samples: &[RouteSample]) -> any
     std::fs::write(dir.join("edges.txt"), edges)?;
     let queries: String = samples
         .iter()
-        .map(|s| format!("{} {} {}\n", s.from, s.to, s.distance.map_or(-1, |d| d as i64)))
+        .map(|s| {
+            format!(
+                "{} {} {}\n",
+                s.from,
+                s.to,
+                s.distance.map_or(-1, |d| d as i64)
+            )
+        })
         .collect();
     std::fs::write(dir.join("queries.txt"), queries)?;
     Ok(())
@@ -228,9 +311,18 @@ fn run_script(script: &Path, dir: &Path) -> anyhow::Result<serde_json::Value> {
     if !out.status.success() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         let tail: Vec<&str> = stderr.lines().rev().take(5).collect();
-        bail!("{} failed ({}): {}", script.display(), out.status, tail.into_iter().rev().collect::<Vec<_>>().join(" | "));
+        bail!(
+            "{} failed ({}): {}",
+            script.display(),
+            out.status,
+            tail.into_iter().rev().collect::<Vec<_>>().join(" | ")
+        );
     }
     let stdout = String::from_utf8_lossy(&out.stdout);
-    let last = stdout.lines().last().context("the scipy script printed nothing")?;
-    serde_json::from_str(last).with_context(|| format!("parsing the scipy script's output {last:?}"))
+    let last = stdout
+        .lines()
+        .last()
+        .context("the scipy script printed nothing")?;
+    serde_json::from_str(last)
+        .with_context(|| format!("parsing the scipy script's output {last:?}"))
 }
