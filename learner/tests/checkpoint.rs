@@ -24,12 +24,27 @@ fn config() -> protocol::Config {
     c
 }
 
-/// A fresh folder under the temp dir for one test.
-fn scratch(name: &str) -> PathBuf {
+/// A fresh folder under the temp dir for one test, removed when dropped.
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.0);
+    }
+}
+
+fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("asi-ckpt-{}-{name}", std::process::id()));
     let _ = fs::remove_dir_all(&dir);
     fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
 }
 
 /// Trains until nothing is due (φ rounds run to completion).
@@ -129,7 +144,7 @@ fn only_the_newest_two_checkpoints_are_kept_and_unfinished_ones_are_ignored() {
         l.save_checkpoint(&config(), &dir).unwrap();
     }
     fs::create_dir(dir.join(".tmp-ckpt-000009")).unwrap();
-    let mut names: Vec<String> = fs::read_dir(&dir)
+    let mut names: Vec<String> = fs::read_dir(&dir.0)
         .unwrap()
         .map(|e| e.unwrap().file_name().into_string().unwrap())
         .filter(|n| n.starts_with("ckpt-"))
@@ -155,12 +170,11 @@ fn no_checkpoint_is_taken_while_a_phi_round_runs() {
     assert!(matches!(err, CheckpointError::RoundActive), "{err}");
 }
 
-/// A saved checkpoint to damage.
-fn saved(name: &str) -> PathBuf {
-    trained()
-        .save_checkpoint(&config(), &scratch(name))
-        .unwrap()
-        .path
+/// A saved checkpoint to damage (its folder lives as long as the guard).
+fn saved(name: &str) -> (Scratch, PathBuf) {
+    let dir = scratch(name);
+    let path = trained().save_checkpoint(&config(), &dir).unwrap().path;
+    (dir, path)
 }
 
 fn refused(ckpt: &Path, config: &protocol::Config) -> String {
@@ -172,7 +186,7 @@ fn refused(ckpt: &Path, config: &protocol::Config) -> String {
 
 #[test]
 fn a_flipped_byte_is_refused_by_its_checksum_naming_the_file() {
-    let ckpt = saved("flip");
+    let (_dir, ckpt) = saved("flip");
     let file = ckpt.join("replay_low.safetensors");
     let mut bytes = fs::read(&file).unwrap();
     let middle = bytes.len() / 2;
@@ -187,7 +201,7 @@ fn a_flipped_byte_is_refused_by_its_checksum_naming_the_file() {
 
 #[test]
 fn a_truncated_file_is_refused_naming_the_file() {
-    let ckpt = saved("truncated");
+    let (_dir, ckpt) = saved("truncated");
     let file = ckpt.join("critic.safetensors");
     let bytes = fs::read(&file).unwrap();
     fs::write(&file, &bytes[..bytes.len() - 100]).unwrap();
@@ -200,7 +214,7 @@ fn a_truncated_file_is_refused_naming_the_file() {
 
 #[test]
 fn a_missing_file_or_unreadable_manifest_is_refused() {
-    let ckpt = saved("missing");
+    let (_dir, ckpt) = saved("missing");
     fs::remove_file(ckpt.join("state.json")).unwrap();
     let err = refused(&ckpt, &config());
     assert!(err.contains("state.json"), "{err}");
@@ -216,7 +230,7 @@ fn a_missing_file_or_unreadable_manifest_is_refused() {
 #[test]
 fn contents_that_pass_the_checksum_but_do_not_fit_are_refused() {
     // A state file rewritten, with a matching manifest, to hold a field this build lacks.
-    let ckpt = saved("inconsistent");
+    let (_dir, ckpt) = saved("inconsistent");
     let file = ckpt.join("state.json");
     let text = fs::read_to_string(&file).unwrap();
     let broken = text.replacen("\"updates_low\"", "\"updates_lo\"", 1);
@@ -242,7 +256,7 @@ fn contents_that_pass_the_checksum_but_do_not_fit_are_refused() {
 
 #[test]
 fn another_format_or_protocol_version_is_refused() {
-    let ckpt = saved("versions");
+    let (_dir, ckpt) = saved("versions");
     let original = read_manifest(&ckpt);
     for (what, edit) in [
         (
@@ -266,7 +280,7 @@ fn another_format_or_protocol_version_is_refused() {
 
 #[test]
 fn another_network_layout_or_config_is_refused() {
-    let ckpt = saved("config");
+    let (_dir, ckpt) = saved("config");
     let mut wider = config();
     wider.encoder.hidden = vec![12];
     let err = refused(&ckpt, &wider);
