@@ -7,7 +7,7 @@ mod common;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
-use learner::si::SiStats;
+use learner::si::{SiStats, SI_PHI_MISMATCH_ATTEMPTS};
 use learner::{Learner, NoRouteSource, RouteSource, RoutesReply};
 use nets::{spec_from_config, PolicySet};
 use protocol::graph::{LatentPoint, RouteAnswer, RouteQuery};
@@ -198,19 +198,60 @@ fn rounds_fall_due_after_the_start_episode_and_train_both_policies_once_each() {
 }
 
 #[test]
-fn no_answer_and_a_phi_mismatch_skip_the_steps_and_count_them() {
-    let mut l = learner_after(&config(true), 4);
+fn no_answer_skips_the_steps_and_counts_them() {
+    let mut l = learner_after(&config(true), 3);
     assert_eq!(l.train_self_imitation(&mut NoRouteSource).unwrap(), 0);
+    let s = stats(&l);
+    assert_eq!((s.skipped_no_answer, s.skipped()), (2, 2));
+    assert_eq!(s.high_steps + s.low_steps, 0);
+    assert_eq!(
+        l.si_pending(),
+        0,
+        "a round without an answer is not retried"
+    );
+}
+
+#[test]
+fn a_phi_mismatch_keeps_the_round_pending_until_the_graph_catches_up() {
+    let mut l = learner_after(&config(true), 3);
+    let mut graph = StraightRoutes::new(6);
+    graph.mismatch = true;
+    for attempt in 1..SI_PHI_MISMATCH_ATTEMPTS {
+        assert_eq!(l.train_self_imitation(&mut graph).unwrap(), 0);
+        assert_eq!(l.si_pending(), 1, "attempt {attempt}: the round stays due");
+    }
+    assert_eq!(
+        stats(&l).skipped(),
+        0,
+        "nothing is counted while the round waits"
+    );
+    // The graph has re-mapped to the learner's φ: the same round now trains both levels.
+    graph.mismatch = false;
+    assert_eq!(l.train_self_imitation(&mut graph).unwrap(), 2);
+    let s = stats(&l);
+    assert_eq!((s.high_steps, s.low_steps, s.skipped()), (1, 1, 0));
+    assert_eq!(l.si_pending(), 0);
+    assert_eq!(graph.asked.len() as u32, SI_PHI_MISMATCH_ATTEMPTS - 1 + 2);
+}
+
+#[test]
+fn a_phi_mismatch_that_lasts_gives_the_round_up_and_counts_it() {
+    let mut l = learner_after(&config(true), 4);
+    assert_eq!(l.si_pending(), 2);
     let mut stale = StraightRoutes::new(6);
     stale.mismatch = true;
-    assert_eq!(l.train_self_imitation(&mut stale).unwrap(), 0);
+    for _ in 0..SI_PHI_MISMATCH_ATTEMPTS {
+        assert_eq!(l.train_self_imitation(&mut stale).unwrap(), 0);
+    }
     let s = stats(&l);
-    assert_eq!(
-        (s.skipped_no_answer, s.skipped_phi_mismatch, s.skipped()),
-        (2, 2, 4)
-    );
+    assert_eq!((s.skipped_phi_mismatch, s.skipped()), (2, 2));
     assert_eq!(s.high_steps + s.low_steps, 0);
-    assert_eq!(l.si_pending(), 0, "a skipped round is not retried");
+    assert_eq!(l.si_pending(), 1, "only the oldest round was given up");
+    // The attempt count starts over for the next round.
+    for _ in 1..SI_PHI_MISMATCH_ATTEMPTS {
+        assert_eq!(l.train_self_imitation(&mut stale).unwrap(), 0);
+    }
+    assert_eq!((stats(&l).skipped_phi_mismatch, l.si_pending()), (2, 1));
 }
 
 #[test]

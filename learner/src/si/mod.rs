@@ -26,4 +26,4 @@ pub use buffer::{EpisodeRef, SiBuffer, SiBufferParts, SiEntry};
 pub use indices::{reference_indices, target_index, MIN_HIGH_ROUTE_LEN, MIN_LOW_ROUTE_LEN};
 pub use losses::{high_si_loss, low_si_loss, SiLossStats};
 pub use routes::{NoRouteSource, RouteSource, RoutesReply};
-pub use step::{SelfImitation, SiParams, SiSkip, SiStats};
+pub use step::{SelfImitation, SiParams, SiSkip, SiStats, SI_PHI_MISMATCH_ATTEMPTS};

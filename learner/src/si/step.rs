@@ -179,8 +179,17 @@ pub struct SelfImitation {
     obs_dim: usize,
     goal_dim: usize,
     pending: u64,
+    /// Consecutive attempts of the oldest due round that met a graph with another φ version.
+    phi_attempts: u32,
     stats: SiStats,
 }
+
+/// How many times a due round whose high-level step met a graph with another φ version (the
+/// graph-service re-maps its nodes right after a φ round) is kept pending and tried again on a
+/// later call of [`SelfImitation::run_round`] before it is given up and its steps are counted
+/// in `skipped_phi_mismatch`. Unit: attempts. Source: this implementation (the reference code
+/// runs graph and learner in one process, where the race cannot happen).
+pub const SI_PHI_MISMATCH_ATTEMPTS: u32 = 100;
 
 impl SelfImitation {
     /// SI for observations of `obs_dim` and goals of `goal_dim` values.
@@ -191,6 +200,7 @@ impl SelfImitation {
             obs_dim,
             goal_dim,
             pending: 0,
+            phi_attempts: 0,
             stats: SiStats::default(),
         }
     }
@@ -238,6 +248,7 @@ impl SelfImitation {
         }
         self.buffer = buffer;
         self.pending = pending;
+        self.phi_attempts = 0;
         self.stats = stats;
         Ok(())
     }
@@ -258,7 +269,9 @@ impl SelfImitation {
     }
 
     /// Runs one due round (high step, then low step) if any; returns the Adam steps taken
-    /// (0–2). Points are computed with the learner's encoder, whose φ version is `phi_version`.
+    /// (0–2). A round whose high step meets a graph with another φ version stays due and is
+    /// tried again on the next call, up to [`SI_PHI_MISMATCH_ATTEMPTS`] attempts in a row; then
+    /// it is given up and its skipped steps are counted. Points are computed with the learner's encoder, whose φ version is `phi_version`.
     pub fn run_round(
         &mut self,
         nets: &mut Networks,
@@ -269,14 +282,22 @@ impl SelfImitation {
         if self.pending == 0 {
             return Ok(0);
         }
-        self.pending -= 1;
         let mut steps = 0;
         for level in [Level::High, Level::Low] {
             match self.level_step(level, nets, rng, source, phi_version)? {
                 Ok(()) => steps += 1,
+                Err(SiSkip::PhiMismatch)
+                    if level == Level::High && self.phi_attempts + 1 < SI_PHI_MISMATCH_ATTEMPTS =>
+                {
+                    // The graph has not re-mapped to our φ yet: keep the round for later.
+                    self.phi_attempts += 1;
+                    return Ok(0);
+                }
                 Err(skip) => self.stats.count_skip(skip),
             }
         }
+        self.phi_attempts = 0;
+        self.pending -= 1;
         Ok(steps)
     }
 
