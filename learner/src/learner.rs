@@ -497,6 +497,22 @@ impl Learner {
         Ok(Some((header, bytes)))
     }
 
+    /// After a restart from a checkpoint: continues the version counters above what an earlier
+    /// incarnation of this learner already published (`policy`, `phi`), so the versions that
+    /// actors, evaluator and graph-service see only go up even though the checkpoint is older.
+    /// The φ version moves only if a φ round finished after the checkpoint (same φ version,
+    /// same encoder: checkpoints are never written during a round); a moved φ version makes the
+    /// next [`Learner::publish_due`] publish at once, so the graph-service re-maps with the
+    /// restored encoder. Versions already above the given ones are kept.
+    pub fn continue_versions_after(&mut self, policy: PolicyVersion, phi: PhiVersion) {
+        if self.policy_version.0 <= policy.0 {
+            self.policy_version = PolicyVersion(policy.0 + 1);
+        }
+        if self.phi_version.0 < phi.0 {
+            self.phi_version = PhiVersion(phi.0 + 1);
+        }
+    }
+
     /// Layout hash of the published parameter set ([`nets::layout_hash`]).
     pub fn weights_layout_hash(&self) -> u64 {
         nets::layout_hash(&self.nets.policy_vm)

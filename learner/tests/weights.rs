@@ -93,3 +93,28 @@ fn a_new_version_is_published_only_after_updates_and_the_interval_and_versions_g
     let (third, _) = l.publish_due().unwrap().unwrap();
     assert_eq!(third.policy_version, PolicyVersion(2));
 }
+
+#[test]
+fn a_restarted_learner_continues_its_versions_above_what_was_published_before() {
+    let mut l = learner();
+    let (first, _) = l.publish_due().unwrap().unwrap();
+    assert_eq!(first.phi_version, PhiVersion(0));
+    // An earlier incarnation published policy 7 with φ 2 after the checkpoint we restored.
+    l.continue_versions_after(PolicyVersion(7), PhiVersion(2));
+    let (next, _) = l
+        .publish_due()
+        .unwrap()
+        .expect("a new φ version is published at once");
+    assert!(next.policy_version.0 > 7, "{next:?}");
+    assert_eq!(next.phi_version, PhiVersion(3));
+    // Versions above the given ones are kept; the φ version does not move for an equal one.
+    l.continue_versions_after(PolicyVersion(1), PhiVersion(3));
+    assert_eq!(l.progress().policy_version, next.policy_version);
+    assert_eq!(l.progress().phi_version, PhiVersion(3));
+    l.continue_versions_after(next.policy_version, PhiVersion(3));
+    assert_eq!(
+        l.progress().policy_version.0,
+        next.policy_version.0 + 1,
+        "an equal policy version is passed"
+    );
+}

@@ -2,6 +2,7 @@
 //! chunk, loads new weights when they arrive, and pauses (sleeping on the progress channel)
 //! while the learner's replay-ratio budget is used up (SPEC §6.8). HESS exploration requests and
 //! reaching reports go to the graph-service over the run's `graph` request–response service.
+//! Running totals of what it published are kept in the run's status folder ([`record_published`]).
 
 use std::time::Duration;
 
@@ -24,7 +25,8 @@ pub struct ActorArgs {
 
 pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     let config = &ctx.config;
-    let mut actor = Actor::new(config, ActorId(args.actor_id), config.run.seed).context("building the actor")?;
+    let mut actor = Actor::new(config, ActorId(args.actor_id), config.run.seed)
+        .context("building the actor")?;
     actor.start_at_episode(first_episode(args.incarnation))?;
     let node = node(ctx, &format!("actor-{}", args.actor_id))?;
     let channels = Channels::new(config, &ctx.run_id, &actor.layout());
@@ -33,12 +35,21 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     let progress = channels.progress_subscriber(&node)?;
     let timeout = Duration::from_millis(config.transport.graph_request_timeout_ms);
     let mut oracle = ServiceOracle::new(IpcGraph::new(channels.graph_client(&node)?, timeout));
-    let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Actor, args.actor_id, config);
+    let mut metrics = MetricsOut::new(
+        channels.metrics_publisher(&node)?,
+        ProcessRole::Actor,
+        args.actor_id,
+        config,
+    );
     let stop = StopWatch::new();
     let mut throttle = Throttle::default();
     let mut published_steps = 0u64;
     let mut published_chunks = 0u64;
     let mut reach_means = ReachMeans::default();
+    let published_file = ctx.run_dir.join(crate::run::STATUS_DIR).join(format!(
+        "actor-{}-{}.published",
+        args.actor_id, args.incarnation
+    ));
     let reason = loop {
         if let Some(reason) = stop.should_stop(&node) {
             break reason;
@@ -55,19 +66,28 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             continue;
         }
         let chunk = actor.next_chunk(&mut oracle)?;
-        trajectories.send(chunk.header, &chunk.records)?;
         published_steps += u64::from(chunk.header.n_steps);
         published_chunks += 1;
+        record_published(&published_file, published_steps, published_chunks)?;
+        trajectories.send(chunk.header, &chunk.records)?;
         throttle.published(u64::from(chunk.header.n_steps));
         if metrics.due() {
             let mut values = actor_metrics(&actor.stats(), published_steps);
             values.extend(reach_means.since_last(&actor.stats()));
-            values.push(("actor/graph_unreachable".to_owned(), oracle.transport().n_unreachable as f64));
+            values.push((
+                "actor/graph_unreachable".to_owned(),
+                oracle.transport().n_unreachable as f64,
+            ));
             values.push(("actor/incarnation".to_owned(), f64::from(args.incarnation)));
             metrics.publish(published_steps, &values);
         }
     };
-    tracing::info!(actor = args.actor_id, reason, published_steps, "actor stopping");
+    tracing::info!(
+        actor = args.actor_id,
+        reason,
+        published_steps,
+        "actor stopping"
+    );
     let stats = actor.stats();
     ctx.write_status(
         &format!("actor-{}-{}", args.actor_id, args.incarnation),
@@ -81,6 +101,15 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             "stop_reason": reason,
         }),
     )
+}
+
+/// Writes this incarnation's running totals to `status/actor-<id>-<incarnation>.published`
+/// just before each chunk is sent, so that they survive a SIGKILL (the final status file does
+/// not): an actor killed between the write and the send counts one chunk that never left.
+/// Fault-injection tests compare these totals with what the learner ingested.
+fn record_published(path: &std::path::Path, steps: u64, chunks: u64) -> anyhow::Result<()> {
+    let totals = serde_json::json!({ "published_steps": steps, "published_chunks": chunks });
+    crate::run::write_atomically(path, &totals.to_string())
 }
 
 /// The learner's replay-ratio budget as this actor sees it (SPEC §6.8): the latest progress
@@ -109,7 +138,10 @@ impl Throttle {
     }
 
     fn allows_more(&self) -> bool {
-        self.latest.env_steps_ingested.saturating_add(self.in_flight_steps) < self.latest.env_step_budget
+        self.latest
+            .env_steps_ingested
+            .saturating_add(self.in_flight_steps)
+            < self.latest.env_step_budget
     }
 }
 
@@ -137,15 +169,36 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
         ("actor/env_steps".to_owned(), published_steps as f64),
         ("actor/episodes".to_owned(), s.episodes as f64),
         ("actor/policy_version".to_owned(), s.policy_version.0 as f64),
-        ("actor/last_episode_return".to_owned(), f64::from(s.last_episode_return)),
-        ("actor/physics_failures".to_owned(), s.n_physics_failures as f64),
+        (
+            "actor/last_episode_return".to_owned(),
+            f64::from(s.last_episode_return),
+        ),
+        (
+            "actor/physics_failures".to_owned(),
+            s.n_physics_failures as f64,
+        ),
         ("actor/decisions".to_owned(), s.n_decisions as f64),
-        ("actor/explore_decisions".to_owned(), s.n_explore_decisions as f64),
-        ("actor/explore_fallbacks".to_owned(), s.n_explore_fallbacks as f64),
+        (
+            "actor/explore_decisions".to_owned(),
+            s.n_explore_decisions as f64,
+        ),
+        (
+            "actor/explore_fallbacks".to_owned(),
+            s.n_explore_fallbacks as f64,
+        ),
         ("actor/reach_reports".to_owned(), s.n_reach_reports as f64),
-        ("actor/reach_samples_sent".to_owned(), s.n_reach_samples_sent as f64),
-        ("actor/reach_samples_dropped".to_owned(), s.n_reach_samples_dropped as f64),
-        ("actor/count_prob".to_owned(), f64::from(s.schedule.count_prob)),
+        (
+            "actor/reach_samples_sent".to_owned(),
+            s.n_reach_samples_sent as f64,
+        ),
+        (
+            "actor/reach_samples_dropped".to_owned(),
+            s.n_reach_samples_dropped as f64,
+        ),
+        (
+            "actor/count_prob".to_owned(),
+            f64::from(s.schedule.count_prob),
+        ),
         ("actor/fr_prob".to_owned(), f64::from(s.schedule.fr_prob)),
     ];
     let fr = &s.frontier;
@@ -156,16 +209,30 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
         ("actor/fr/waypoint_decisions", fr.n_waypoint_decisions),
         ("actor/fr/count_decisions", fr.n_count_decisions),
         ("actor/fr/count_fallbacks", fr.n_count_fallbacks),
-        ("actor/fr/near_frontier_switches", fr.n_near_frontier_switches),
+        (
+            "actor/fr/near_frontier_switches",
+            fr.n_near_frontier_switches,
+        ),
         ("actor/fr/stuck_switches", fr.n_stuck_switches),
         ("actor/fr/ended_by_new_phi", fr.n_ended_by_new_phi),
     ];
-    values.extend(frontier.into_iter().map(|(name, v)| (name.to_owned(), v as f64)));
+    values.extend(
+        frontier
+            .into_iter()
+            .map(|(name, v)| (name.to_owned(), v as f64)),
+    );
     let optional = [
         ("actor/last_episode_reach_error", s.last_episode_reach_error),
-        ("actor/last_episode_explore_reach_error", s.last_episode_explore_reach_error),
+        (
+            "actor/last_episode_explore_reach_error",
+            s.last_episode_explore_reach_error,
+        ),
     ];
-    values.extend(optional.into_iter().filter_map(|(name, v)| Some((name.to_owned(), f64::from(v?)))));
+    values.extend(
+        optional
+            .into_iter()
+            .filter_map(|(name, v)| Some((name.to_owned(), f64::from(v?)))),
+    );
     values
 }
 
@@ -181,8 +248,16 @@ impl ReachMeans {
     pub fn since_last(&mut self, s: &ActorStats) -> Vec<(String, f64)> {
         let mut values = Vec::new();
         let pairs = [
-            ("actor/reach_error", &mut self.all, (s.reach_error_sum, s.n_reach_segments)),
-            ("actor/explore_reach_error", &mut self.explore, (s.explore_reach_error_sum, s.n_explore_reach_segments)),
+            (
+                "actor/reach_error",
+                &mut self.all,
+                (s.reach_error_sum, s.n_reach_segments),
+            ),
+            (
+                "actor/explore_reach_error",
+                &mut self.explore,
+                (s.explore_reach_error_sum, s.n_explore_reach_segments),
+            ),
         ];
         for (name, last, now) in pairs {
             if now.1 > last.1 {
@@ -199,7 +274,11 @@ mod tests {
     use super::*;
 
     fn progress(ingested: u64, budget: u64) -> ProgressMessage {
-        ProgressMessage { env_steps_ingested: ingested, env_step_budget: budget, ..ProgressMessage::default() }
+        ProgressMessage {
+            env_steps_ingested: ingested,
+            env_step_budget: budget,
+            ..ProgressMessage::default()
+        }
     }
 
     #[test]
@@ -211,10 +290,19 @@ mod tests {
         throttle.published(50);
         assert!(throttle.allows_more(), "1000 + 50 < 1100");
         throttle.published(50);
-        assert!(!throttle.allows_more(), "1000 + 100 in flight reaches the budget");
+        assert!(
+            !throttle.allows_more(),
+            "1000 + 100 in flight reaches the budget"
+        );
         throttle.observe(progress(1000, 1100));
-        assert!(!throttle.allows_more(), "a repeated message does not forget what is in flight");
+        assert!(
+            !throttle.allows_more(),
+            "a repeated message does not forget what is in flight"
+        );
         throttle.observe(progress(1100, 1300));
-        assert!(throttle.allows_more(), "the learner took our steps: 1100 < 1300");
+        assert!(
+            throttle.allows_more(),
+            "the learner took our steps: 1100 < 1300"
+        );
     }
 }

@@ -2,15 +2,28 @@
 //! ratio, runs the due self-imitation rounds with routes from the graph-service (SPEC §6.7),
 //! publishes versioned weights and the throttle state. Sleeps on its channels' events when it
 //! has nothing to do.
+//!
+//! Crash recovery: a learner restarted by the launcher starts from the newest checkpoint
+//! ([`crate::run::open_learner`]). Before each weights message it records the versions in
+//! `status/learner.published.json` ([`PUBLISHED_FILE`]); a restarted learner continues its
+//! versions above those ([`learner::Learner::continue_versions_after`]), so the versions every
+//! other process sees only go up although the checkpoint is older. Each start appends a line to
+//! `status/learner.starts.jsonl` ([`STARTS_FILE`]: pid, env steps restored, versions), written
+//! once its trajectory subscriber exists.
 
 use std::time::{Duration, Instant};
 
+use anyhow::Context;
 use iceoryx2::prelude::*;
 use learner::Learner;
 use protocol::transport::{Ipc, ValuePublisher};
-use protocol::{ControlCommand, ProcessRole, ProgressMessage, PROTOCOL_VERSION};
+use protocol::{
+    ControlCommand, PhiVersion, PolicyVersion, ProcessRole, ProgressMessage, PROTOCOL_VERSION,
+};
 
-use super::common::{node, task_info, CoverageTracker, GraphRoutes, IpcGraph, MetricsOut, StopWatch};
+use super::common::{
+    node, task_info, CoverageTracker, GraphRoutes, IpcGraph, MetricsOut, StopWatch,
+};
 use crate::channels::{Channels, WeightsPublisher};
 use crate::run::RunContext;
 
@@ -20,6 +33,10 @@ const IDLE_WAIT: Duration = Duration::from_millis(50);
 const UPDATES_PER_TICK: usize = 8;
 /// How often publishers hand their history (latest weights, progress) to new subscribers.
 const RECONNECT_INTERVAL: Duration = Duration::from_millis(500);
+/// Status file: the versions of the newest weights message this launch's learners published.
+pub const PUBLISHED_FILE: &str = "learner.published.json";
+/// Status file: one JSON line per learner start of this launch.
+pub const STARTS_FILE: &str = "learner.starts.jsonl";
 
 pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
@@ -27,6 +44,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let layout = task.layout;
     let mut coverage = CoverageTracker::new(config, layout)?;
     let mut learner = crate::run::open_learner(ctx, task.dims, task.episode_length)?;
+    continue_published_versions(ctx, &mut learner)?;
     let mut checkpoints = crate::run::CheckpointTimer::new(config);
     let node = node(ctx, "learner")?;
     let channels = Channels::new(config, &ctx.run_id, &layout);
@@ -35,19 +53,32 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let progress = channels.progress_publisher(&node)?;
     let mut weights: Option<WeightsPublisher> = None;
     let mut si_routes = si_route_source(config, &channels, &node)?;
-    let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Learner, 0, config);
-    let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
-    let _chunks = waitset.attach_notification(trajectories.listener()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let _control = waitset.attach_notification(control.listener()).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut metrics = MetricsOut::new(
+        channels.metrics_publisher(&node)?,
+        ProcessRole::Learner,
+        0,
+        config,
+    );
+    let waitset = WaitSetBuilder::new()
+        .create::<Ipc>()
+        .map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
+    let _chunks = waitset
+        .attach_notification(trajectories.listener())
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let _control = waitset
+        .attach_notification(control.listener())
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let stop = StopWatch::new();
-    publish_weights(&mut learner, &channels, &node, &mut weights)?;
+    publish_weights(ctx, &mut learner, &channels, &node, &mut weights)?;
     send_progress(&progress, &learner)?;
     ctx.mark_ready("learner")?;
+    record_start(ctx, &learner)?;
     let mut last_reconnect = Instant::now();
     let mut busy = false;
     let reason = loop {
         let timeout = if busy { Duration::ZERO } else { IDLE_WAIT };
-        let _ = waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout);
+        let _ =
+            waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout);
         if let Some(reason) = stop.should_stop(&node).or_else(|| stop_requested(&control)) {
             break reason;
         }
@@ -56,20 +87,26 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         if let Some(routes) = si_routes.as_mut() {
             busy |= learner.train_self_imitation(routes)? > 0;
         }
-        publish_weights(&mut learner, &channels, &node, &mut weights)?;
+        publish_weights(ctx, &mut learner, &channels, &node, &mut weights)?;
         send_progress(&progress, &learner)?;
         if last_reconnect.elapsed() >= RECONNECT_INTERVAL {
             reconnect(&progress, weights.as_ref());
             last_reconnect = Instant::now();
         }
         if metrics.due() {
-            metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner, &coverage));
+            metrics.publish(
+                learner.progress().env_steps_ingested,
+                &learner_metrics(&learner, &coverage),
+            );
         }
         checkpoints.tick(ctx, &learner);
     };
     // Actors are stopped first; whatever they sent is in our buffer: take it before leaving.
     ingest_all(&mut learner, &mut coverage, &trajectories);
-    metrics.publish(learner.progress().env_steps_ingested, &learner_metrics(&learner, &coverage));
+    metrics.publish(
+        learner.progress().env_steps_ingested,
+        &learner_metrics(&learner, &coverage),
+    );
     tracing::info!(reason, "learner stopping");
     crate::run::final_checkpoint(ctx, &mut learner)?;
     write_final_status(ctx, &learner, reason)
@@ -77,15 +114,26 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
 
 /// The graph-service client for self-imitation routes; `None` when `asi.self_imitation` is off
 /// (no graph port is taken then).
-fn si_route_source(config: &protocol::Config, channels: &Channels, node: &Node<Ipc>) -> anyhow::Result<Option<GraphRoutes<IpcGraph>>> {
+fn si_route_source(
+    config: &protocol::Config,
+    channels: &Channels,
+    node: &Node<Ipc>,
+) -> anyhow::Result<Option<GraphRoutes<IpcGraph>>> {
     if !config.asi.self_imitation {
         return Ok(None);
     }
     let timeout = Duration::from_millis(config.transport.graph_request_timeout_ms);
-    Ok(Some(GraphRoutes::new(IpcGraph::new(channels.graph_client(node)?, timeout))))
+    Ok(Some(GraphRoutes::new(IpcGraph::new(
+        channels.graph_client(node)?,
+        timeout,
+    ))))
 }
 
-fn ingest_all(learner: &mut Learner, coverage: &mut CoverageTracker, trajectories: &crate::channels::TrajectorySubscriber) {
+fn ingest_all(
+    learner: &mut Learner,
+    coverage: &mut CoverageTracker,
+    trajectories: &crate::channels::TrajectorySubscriber,
+) {
     let drained = trajectories.drain(|header, payload| match learner.ingest(header, payload) {
         Ok(_) => coverage.observe(payload),
         Err(err) => tracing::warn!("rejected a trajectory chunk: {err:#}"),
@@ -95,18 +143,29 @@ fn ingest_all(learner: &mut Learner, coverage: &mut CoverageTracker, trajectorie
     }
 }
 
-fn stop_requested(control: &protocol::transport::ValueSubscriber<protocol::ControlMessage>) -> Option<&'static str> {
+fn stop_requested(
+    control: &protocol::transport::ValueSubscriber<protocol::ControlMessage>,
+) -> Option<&'static str> {
     let messages = control.drain().ok()?;
-    messages.iter().any(|m| m.command() == Ok(ControlCommand::Stop)).then_some("stop requested")
+    messages
+        .iter()
+        .any(|m| m.command() == Ok(ControlCommand::Stop))
+        .then_some("stop requested")
 }
 
 fn publish_weights(
+    ctx: &RunContext,
     learner: &mut Learner,
     channels: &Channels,
     node: &Node<Ipc>,
     weights: &mut Option<WeightsPublisher>,
 ) -> anyhow::Result<()> {
-    let Some((header, bytes)) = learner.publish_due()? else { return Ok(()) };
+    let Some((header, bytes)) = learner.publish_due()? else {
+        return Ok(());
+    };
+    // Recorded before the send: a learner killed in between only skips one version number.
+    let versions = serde_json::json!({ "policy_version": header.policy_version.0, "phi_version": header.phi_version.0 });
+    crate::run::write_atomically(&status_file(ctx, PUBLISHED_FILE), &versions.to_string())?;
     if weights.is_none() {
         *weights = Some(channels.weights_publisher(node, bytes.len())?);
     }
@@ -116,7 +175,68 @@ fn publish_weights(
     Ok(())
 }
 
-fn send_progress(progress: &ValuePublisher<ProgressMessage>, learner: &Learner) -> anyhow::Result<()> {
+fn status_file(ctx: &RunContext, name: &str) -> std::path::PathBuf {
+    ctx.run_dir.join(crate::run::STATUS_DIR).join(name)
+}
+
+/// A learner restarted within this launch continues its versions above what its predecessor
+/// published (see the module doc); a first start finds no file and changes nothing.
+fn continue_published_versions(ctx: &RunContext, learner: &mut Learner) -> anyhow::Result<()> {
+    let path = status_file(ctx, PUBLISHED_FILE);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(err) => return Err(err).with_context(|| format!("reading {}", path.display())),
+    };
+    let value: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    let version = |key: &str| {
+        value[key]
+            .as_u64()
+            .with_context(|| format!("`{key}` missing in {}", path.display()))
+    };
+    let (policy, phi) = (
+        PolicyVersion(version("policy_version")?),
+        PhiVersion(version("phi_version")?),
+    );
+    let restored = learner.progress();
+    learner.continue_versions_after(policy, phi);
+    let now = learner.progress();
+    tracing::info!(
+        published_policy = policy.0,
+        published_phi = phi.0,
+        restored_policy = restored.policy_version.0,
+        restored_phi = restored.phi_version.0,
+        policy = now.policy_version.0,
+        phi = now.phi_version.0,
+        "restarted learner continues the weights versions of its predecessor"
+    );
+    Ok(())
+}
+
+/// Appends this start to [`STARTS_FILE`] (one `write` of one line, so concurrent readers see
+/// whole lines).
+fn record_start(ctx: &RunContext, learner: &Learner) -> anyhow::Result<()> {
+    use std::io::Write;
+    let p = learner.progress();
+    let line = serde_json::json!({
+        "pid": std::process::id(), "env_steps": p.env_steps_ingested, "updates_low": p.updates_low,
+        "policy_version": p.policy_version.0, "phi_version": p.phi_version.0,
+    });
+    let path = status_file(ctx, STARTS_FILE);
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    file.write_all(format!("{line}\n").as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+fn send_progress(
+    progress: &ValuePublisher<ProgressMessage>,
+    learner: &Learner,
+) -> anyhow::Result<()> {
     let p = learner.progress();
     progress.send(ProgressMessage {
         env_steps_ingested: p.env_steps_ingested,
@@ -139,7 +259,11 @@ fn reconnect(progress: &ValuePublisher<ProgressMessage>, weights: Option<&Weight
 }
 
 fn learner_metrics(learner: &Learner, coverage: &CoverageTracker) -> Vec<(String, f64)> {
-    let mut values: Vec<(String, f64)> = learner.metrics().into_iter().map(|(k, v)| (k.to_owned(), v)).collect();
+    let mut values: Vec<(String, f64)> = learner
+        .metrics()
+        .into_iter()
+        .map(|(k, v)| (k.to_owned(), v))
+        .collect();
     values.extend(coverage.metrics());
     values
 }
@@ -147,8 +271,11 @@ fn learner_metrics(learner: &Learner, coverage: &CoverageTracker) -> Vec<(String
 fn write_final_status(ctx: &RunContext, learner: &Learner, reason: &str) -> anyhow::Result<()> {
     let p = learner.progress();
     let s = learner.ingest_stats();
-    let per_actor: serde_json::Map<String, serde_json::Value> =
-        s.per_actor_steps.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v))).collect();
+    let per_actor: serde_json::Map<String, serde_json::Value> = s
+        .per_actor_steps
+        .iter()
+        .map(|(k, v)| (k.to_string(), serde_json::json!(v)))
+        .collect();
     ctx.write_status(
         "learner",
         &serde_json::json!({
