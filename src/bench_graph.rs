@@ -5,8 +5,10 @@
 //! visit/future-count recount — timed separately; `--candle` adds the former candle re-map),
 //! route query latency p50/p99 (wall time, and the querying thread's CPU time, which leaves out
 //! preemption on a loaded machine) on the graph of the first size (capped at
-//! `graph.max_nodes` = 5,000 nodes), the time of all-pairs shortest paths (Dijkstra from every
-//! node) on that graph, and the same measurements by scipy (`scripts/bench_graph_scipy.py`,
+//! `graph.max_nodes` = 5,000 nodes) — first searched per query (`route_dijkstra_*`), then
+//! looked up in the route table the service builds after each rebuild (`route_*`, with the
+//! table's build time and size, and a check that both give the same distances) — the time of
+//! all-pairs shortest paths (Dijkstra from every node, one thread) on that graph, and the same measurements by scipy (`scripts/bench_graph_scipy.py`,
 //! which installs scipy into its own venv) on the same graph and queries, with ratios. Without
 //! `python3` (or with `--no-python`) the scipy side is skipped with a message.
 use std::path::{Path, PathBuf};
@@ -79,7 +81,26 @@ pub fn run(args: &BenchGraphArgs) -> anyhow::Result<()> {
         route_graph.get_or_insert(graph);
     }
     let graph = route_graph.context("no store size measured")?;
+    let searched = time_routes(&graph, args.queries, args.seed, Some(thread_cpu_secs));
+    report_latency("route_dijkstra", &searched)?;
+    let start = Instant::now();
+    let built = graph.build_route_table(config.graph.remap_threads);
+    let table_secs = start.elapsed().as_secs_f64();
+    anyhow::ensure!(built, "no route table for {} nodes", graph.n_nodes());
+    println!("route_table_build_secs: {table_secs:.3}");
+    if let Some(table) = graph.route_table() {
+        println!(
+            "route_table_mib: {:.1}",
+            table.bytes() as f64 / (1 << 20) as f64
+        );
+    }
     let samples = time_routes(&graph, args.queries, args.seed, Some(thread_cpu_secs));
+    let agree = searched
+        .iter()
+        .zip(&samples)
+        .all(|(a, b)| (a.from, a.to, a.distance) == (b.from, b.to, b.distance));
+    println!("route_table_agrees_with_dijkstra: {agree}");
+    anyhow::ensure!(agree, "route table and Dijkstra disagree on a query");
     let ours = report_routes(&graph, &samples)?;
     if args.no_python {
         println!("scipy: skipped (--no-python)");
@@ -165,11 +186,28 @@ struct Ours {
     all_pairs_secs: f64,
 }
 
-fn report_routes(graph: &LatentGraph, samples: &[RouteSample]) -> anyhow::Result<Ours> {
+/// Prints `<prefix>_p50_us`, `_p99_us` (wall) and `_cpu_p50_us`, `_cpu_p99_us` (thread CPU
+/// time) of `samples`; returns the wall p50 and p99.
+fn report_latency(prefix: &str, samples: &[RouteSample]) -> anyhow::Result<(f64, f64)> {
     let micros: Vec<f64> = samples.iter().map(|s| s.secs * 1e6).collect();
     let (Some(p50_us), Some(p99_us)) = (quantile(&micros, 0.5), quantile(&micros, 0.99)) else {
         bail!("no route query was timed (empty graph?)");
     };
+    println!("{prefix}_p50_us: {p50_us:.1}");
+    println!("{prefix}_p99_us: {p99_us:.1}");
+    let cpu_micros: Vec<f64> = samples
+        .iter()
+        .filter_map(|s| s.cpu_secs)
+        .map(|s| s * 1e6)
+        .collect();
+    if let (Some(p50), Some(p99)) = (quantile(&cpu_micros, 0.5), quantile(&cpu_micros, 0.99)) {
+        println!("{prefix}_cpu_p50_us: {p50:.1}");
+        println!("{prefix}_cpu_p99_us: {p99:.1}");
+    }
+    Ok((p50_us, p99_us))
+}
+
+fn report_routes(graph: &LatentGraph, samples: &[RouteSample]) -> anyhow::Result<Ours> {
     let start = Instant::now();
     let mut reachable_pairs = 0usize;
     for source in 0..graph.n_nodes() as u32 {
@@ -193,17 +231,7 @@ fn report_routes(graph: &LatentGraph, samples: &[RouteSample]) -> anyhow::Result
         "route_reachable_fraction: {:.4}",
         reachable as f64 / samples.len() as f64
     );
-    println!("route_p50_us: {p50_us:.1}");
-    println!("route_p99_us: {p99_us:.1}");
-    let cpu_micros: Vec<f64> = samples
-        .iter()
-        .filter_map(|s| s.cpu_secs)
-        .map(|s| s * 1e6)
-        .collect();
-    if let (Some(p50), Some(p99)) = (quantile(&cpu_micros, 0.5), quantile(&cpu_micros, 0.99)) {
-        println!("route_cpu_p50_us: {p50:.1}");
-        println!("route_cpu_p99_us: {p99:.1}");
-    }
+    let (p50_us, p99_us) = report_latency("route", samples)?;
     println!("all_pairs_reachable_pairs: {reachable_pairs}");
     println!("all_pairs_secs: {all_pairs_secs:.3}");
     Ok(Ours {

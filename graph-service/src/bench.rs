@@ -222,7 +222,8 @@ pub struct RouteSample {
 }
 
 /// Times `n_queries` routes between uniformly random node pairs of `graph` (seeded), each
-/// the full query the service runs ([`route_between`]: Dijkstra and path recovery).
+/// the full query the service runs ([`route_between`]: a lookup in the graph's route table
+/// once built, otherwise Dijkstra and path recovery).
 /// `thread_cpu_secs`, if given, reads the calling thread's CPU time in seconds.
 pub fn time_routes(
     graph: &LatentGraph,

@@ -126,6 +126,23 @@ pub fn shortest_path_to(
     found.then(|| walk_back(&pred, target))
 }
 
+/// Full Dijkstra from `source` into caller-owned buffers (both of length `adjacency.len()`,
+/// overwritten): afterwards `pred[v]` is v's predecessor on the shortest path from `source`
+/// (`NodeId::MAX` for the source and unreached nodes) — the same predecessors as
+/// [`shortest_paths`], without allocating. Used to fill the all-pairs route table.
+pub(crate) fn predecessors_into(
+    adjacency: &Adjacency,
+    source: NodeId,
+    dist: &mut [u64],
+    pred: &mut [NodeId],
+) {
+    dist.fill(UNREACHED);
+    pred.fill(NO_PRED);
+    if (source as usize) < adjacency.len() {
+        settle(adjacency, source, dist, pred, |_| false);
+    }
+}
+
 /// Nodes from the source to `target` by predecessors (`target` reached).
 fn walk_back(pred: &[NodeId], target: NodeId) -> Vec<NodeId> {
     let mut path = vec![target];

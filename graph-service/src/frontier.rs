@@ -118,13 +118,18 @@ pub fn route(
     route_between(graph, from, to)
 }
 
-/// Shortest route between two nodes, both included.
+/// Shortest route between two nodes, both included: a lookup in the graph's route table
+/// when it is built, Dijkstra otherwise (the same route).
 pub fn route_between(
     graph: &LatentGraph,
     from: NodeId,
     to: NodeId,
 ) -> Result<Vec<NodeId>, NoRoute> {
-    shortest_path_to(graph.adjacency(), from, to).ok_or(NoRoute::Unreachable { from, to })
+    let path = match graph.route_table() {
+        Some(table) => table.path(from, to),
+        None => shortest_path_to(graph.adjacency(), from, to),
+    };
+    path.ok_or(NoRoute::Unreachable { from, to })
 }
 
 /// A uniformly random node farther than `fraction × max` from the cell of `from`, with the

@@ -18,10 +18,12 @@
 //! once in each direction, sorted by `v`.
 
 use std::collections::{HashMap, HashSet};
+use std::sync::{Arc, OnceLock};
 
 use protocol::LatentPoint;
 
 use crate::grid::{CellKey, Grid};
+use crate::route_table::{RouteTable, MAX_TABLE_NODES};
 
 /// Index of a node, `0..n_nodes`, in first-seen order.
 pub type NodeId = u32;
@@ -88,6 +90,9 @@ pub struct LatentGraph {
     edges: Vec<(NodeId, NodeId, EdgeWeight)>,
     n_dropped_cells: u64,
     n_unmapped_states: u64,
+    /// The all-pairs route table once built; shared by clones of this graph (they are the
+    /// same graph), filled at most once.
+    route_table: Arc<OnceLock<RouteTable>>,
 }
 
 impl LatentGraph {
@@ -119,6 +124,47 @@ impl LatentGraph {
     /// Neighbour lists, indexed by node id.
     pub fn adjacency(&self) -> &Adjacency {
         &self.adjacency
+    }
+
+    /// The all-pairs route table, once built ([`crate::route_table`]).
+    pub fn route_table(&self) -> Option<&RouteTable> {
+        self.route_table.get()
+    }
+
+    /// Builds the route table on this thread with `threads` workers unless it is already
+    /// built; returns whether the graph has one afterwards (false above
+    /// [`MAX_TABLE_NODES`] nodes).
+    pub fn build_route_table(&self, threads: usize) -> bool {
+        if self.route_table.get().is_none() {
+            if let Some(table) = RouteTable::build(&self.adjacency, threads, &|| false) {
+                // Another thread may have filled it meanwhile: the same table, either is fine.
+                let _ = self.route_table.set(table);
+            }
+        }
+        self.route_table.get().is_some()
+    }
+
+    /// Starts building the route table on a background thread (with `threads` workers) and
+    /// returns at once; route queries use the table as soon as it is there. The thread gives
+    /// up when every clone of this graph has been dropped (a newer graph replaced it). Does
+    /// nothing for graphs above [`MAX_TABLE_NODES`] nodes or with a table already.
+    pub fn spawn_route_table(&self, threads: usize) -> std::io::Result<()> {
+        if self.route_table.get().is_some() || self.n_nodes() > MAX_TABLE_NODES {
+            return Ok(());
+        }
+        let slot = Arc::downgrade(&self.route_table);
+        let adjacency = self.adjacency.clone();
+        std::thread::Builder::new()
+            .name("route-table".to_owned())
+            .spawn(move || {
+                let cancelled = || slot.strong_count() == 0;
+                if let Some(table) = RouteTable::build(&adjacency, threads, &cancelled) {
+                    if let Some(slot) = slot.upgrade() {
+                        let _ = slot.set(table);
+                    }
+                }
+            })?;
+        Ok(())
     }
 
     /// Undirected edges `(a, b, weight)` with `a < b`, sorted.
@@ -260,6 +306,7 @@ impl GraphBuilder {
             edges,
             n_dropped_cells: self.dropped_cells.len() as u64,
             n_unmapped_states: self.n_unmapped_states,
+            route_table: Arc::default(),
         }
     }
 }

@@ -1,11 +1,13 @@
 //! The graph-service of ASI as a transport-agnostic state machine (SPEC §3, §6.5–6.7): no I/O
-//! and no threads of its own beyond the scoped workers of a φ re-map; the `asi graph-service` binary wires [`GraphService`] to iceoryx2, and
+//! and no threads of its own beyond the scoped workers of a φ re-map and the background build of
+//! the route table; the `asi graph-service` binary wires [`GraphService`] to iceoryx2, and
 //! serial mode and tests call it directly.
 //!
 //! - [`store`]: trajectory store (per episode, in order), bounded, oldest episodes evicted first.
 //! - [`grid`]: cells of side d in φ-space, keys by floor division, node positions.
 //! - [`graph`]: the latent graph of Eq. 8 (min temporal distance within `edge_window`).
 //! - [`dijkstra`]: shortest paths with path recovery.
+//! - [`route_table`]: all-pairs predecessor rows filled after each rebuild (routes by lookup).
 //! - [`frontier`]: frontier choice, routes, SI route queries with the frontier fallback.
 //! - [`counts`]: visit counts n(v) (Eq. 10) and the least-visited candidate.
 //! - [`hess`]: HESS's visit, future-count and potential maps and the explore subgoal (SPEC §6.4).
@@ -29,6 +31,7 @@ pub mod graph;
 pub mod grid;
 pub mod hess;
 pub mod phi;
+pub mod route_table;
 pub mod server;
 pub mod service;
 pub mod store;

@@ -92,6 +92,8 @@ pub struct GraphService {
     edge_window: u32,
     /// `graph.remap_threads`.
     remap_threads: usize,
+    /// `graph.route_table_max_nodes`.
+    route_table_max_nodes: usize,
     pub(crate) frontier_fraction: f64,
     loader: PhiLoader,
     phi: Option<Phi>,
@@ -136,6 +138,7 @@ impl GraphService {
             max_nodes: graph.max_nodes,
             edge_window: graph.edge_window,
             remap_threads: graph.remap_threads,
+            route_table_max_nodes: graph.route_table_max_nodes,
             frontier_fraction: config.asi.frontier_fraction,
             loader: PhiLoader::new(spec, seed)?,
             phi: None,
@@ -268,13 +271,19 @@ impl GraphService {
         Ok(())
     }
 
-    /// Rebuilds the graph from every stored trajectory with the current latent points.
+    /// Rebuilds the graph from every stored trajectory with the current latent points, and
+    /// starts the background build of its route table ([`crate::route_table`]).
     pub fn rebuild(&mut self) {
         let mut builder = GraphBuilder::new(self.grid, self.max_nodes, self.edge_window);
         for trajectory in self.store.trajectories() {
             builder.add_trajectory(trajectory.latents());
         }
-        self.graph = Some(builder.finish());
+        let graph = builder.finish();
+        if graph.n_nodes() <= self.route_table_max_nodes {
+            // Without the table routes are searched per query: slower, same answers.
+            let _ = graph.spawn_route_table(self.remap_threads);
+        }
+        self.graph = Some(graph);
         self.graph_version += 1;
     }
 

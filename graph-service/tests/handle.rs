@@ -11,7 +11,11 @@ use protocol::{GraphRequest, GraphResponse, PhiVersion};
 
 /// A plus-shaped maze of unit cells, arms of length 4, plus a far island (10, 10)–(11, 10).
 fn plus_service() -> graph_service::GraphService {
-    let config = config();
+    plus_service_with(&config())
+}
+
+fn plus_service_with(config: &protocol::Config) -> graph_service::GraphService {
+    let config = config.clone();
     let mut service = service(&config);
     let arms = [(1, 0), (-1, 0), (0, 1), (0, -1)];
     for (episode, (dx, dy)) in arms.into_iter().enumerate() {
@@ -567,4 +571,34 @@ fn requests_with_another_phi_version_are_answered_and_counted() {
         (GraphStatus::Ok, PhiVersion(1))
     );
     assert_eq!(service.stats().stale_phi_requests, 1);
+}
+
+#[test]
+fn routes_are_the_same_with_the_route_table_and_without_it() {
+    let with_table = plus_service();
+    let graph = with_table.graph().expect("built");
+    assert!(graph.build_route_table(1), "a 19-node graph gets a table");
+    let mut no_table_config = config();
+    no_table_config.graph.route_table_max_nodes = 0;
+    let without = plus_service_with(&no_table_config);
+    assert!(without.graph().expect("built").route_table().is_none());
+    let mut cells: Vec<_> = (-4..=4)
+        .map(|i| at(i, 0))
+        .chain((-4..=4).filter(|&i| i != 0).map(|i| at(0, i)))
+        .collect();
+    cells.extend([at(10, 10), at(11, 10), at(7, 7)]);
+    let mut reachable = 0;
+    for &start in &cells {
+        for &end in &cells {
+            let table_answer = with_table.route(start, end);
+            assert_eq!(
+                table_answer,
+                without.route(start, end),
+                "{start:?} -> {end:?}"
+            );
+            reachable += usize::from(table_answer.is_ok());
+        }
+    }
+    // 17 plus cells reach each other, the 2 island cells each other; (7, 7) is no node.
+    assert_eq!(reachable, 17 * 17 + 2 * 2);
 }

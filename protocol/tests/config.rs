@@ -290,3 +290,16 @@ fn the_default_config_file_is_the_defaults() {
     let config = Config::load(Some(&path), &[]).expect("loads");
     assert_eq!(config, Config::default());
 }
+
+#[test]
+fn a_route_table_cap_beyond_16_bit_node_ids_is_refused() {
+    let errors = invalid(Config::load(
+        None,
+        &sets(&["graph.route_table_max_nodes=65536"]),
+    ));
+    assert!(errors.has_path("graph.route_table_max_nodes"), "{errors}");
+    for ok in ["0", "65535"] {
+        Config::load(None, &sets(&[&format!("graph.route_table_max_nodes={ok}")]))
+            .expect("in range");
+    }
+}

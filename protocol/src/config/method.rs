@@ -258,6 +258,11 @@ pub struct GraphConfig {
     /// otherwise idle during a rebuild, and the dev machine has 2 cores. In [1, 256]. Unit:
     /// threads. Source: ours.
     pub remap_threads: usize,
+    /// Graphs with at most this many nodes get an all-pairs route table after each rebuild
+    /// (built on a background thread with `remap_threads` workers; 2·n² bytes, 50 MB at 5,000
+    /// nodes), so route queries are lookups; larger graphs are searched per query. 0 disables
+    /// the table. In [0, 65535]. Default 10 000. Unit: nodes. Source: ours.
+    pub route_table_max_nodes: usize,
 }
 
 impl Default for GraphConfig {
@@ -269,6 +274,7 @@ impl Default for GraphConfig {
             node_position: NodePosition::Corner,
             max_stored_steps: 8_000_000,
             remap_threads: 2,
+            route_table_max_nodes: 10_000,
         }
     }
 }
@@ -285,6 +291,13 @@ impl GraphConfig {
         }
         c.at_least_one("graph.edge_window", u64::from(self.edge_window));
         c.at_least_one("graph.max_stored_steps", self.max_stored_steps);
+        if self.route_table_max_nodes > usize::from(u16::MAX) {
+            c.issue(
+                "graph.route_table_max_nodes",
+                self.route_table_max_nodes,
+                "must be in [0, 65535] (node ids are stored as 16-bit numbers)",
+            );
+        }
         if !(1..=256).contains(&self.remap_threads) {
             c.issue(
                 "graph.remap_threads",
