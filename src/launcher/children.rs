@@ -1,6 +1,13 @@
-//! The launcher's child processes: spawn, watch, restart crashed actors with back-off, stop in
+//! The launcher's child processes: spawn, watch, restart crashed ones with back-off, stop in
 //! order (SIGTERM, then SIGKILL after a grace period).
+//!
+//! Every kind of process comes back after a crash: actors and the evaluator hold nothing worth
+//! keeping; the learner restarts from its newest checkpoint; the graph-service restores what it
+//! saved or starts empty, and its clients fall back to their defaults meanwhile. A crash loop —
+//! more than `run.max_restarts` crashes of one kind within `run.restart_window_mins` — ends the
+//! run with an error naming the process and its log.
 
+use std::collections::{BTreeMap, VecDeque};
 use std::fs::File;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
@@ -34,17 +41,38 @@ impl ChildKind {
         }
     }
 
-    /// Actors and the evaluator hold no state worth keeping: a crashed one is restarted.
-    pub fn restartable(self) -> bool {
+    /// Actors and the evaluator: they produce data and are stopped before the services, which
+    /// drain what they sent.
+    pub fn stops_first(self) -> bool {
         matches!(self, ChildKind::Actor(_) | ChildKind::Evaluator)
     }
+
+    /// The kind without an actor's id: what the crash-loop guard and the per-kind restart
+    /// counts (`launcher/restarts_<family>`) go by.
+    pub fn family(self) -> &'static str {
+        match self {
+            ChildKind::GraphService => "graph_service",
+            ChildKind::Learner => "learner",
+            ChildKind::Actor(_) => "actor",
+            ChildKind::Evaluator => "evaluator",
+        }
+    }
+}
+
+/// What one [`Children::restart_crashed`] call saw and did.
+#[derive(Debug, Default)]
+pub struct Restarts {
+    /// Children found exited.
+    pub crashed: usize,
+    /// Children started again.
+    pub restarted: Vec<ChildKind>,
 }
 
 struct Supervised {
     kind: ChildKind,
     process: Option<Child>,
     incarnation: u32,
-    /// When a crashed actor is due to come back.
+    /// When a crashed process is due to come back.
     restart_at: Option<Instant>,
 }
 
@@ -53,6 +81,10 @@ pub struct Children {
     exe: std::path::PathBuf,
     children: Vec<Supervised>,
     restarts: u64,
+    /// Restarts so far per [`ChildKind::family`].
+    restarts_per_family: BTreeMap<&'static str, u64>,
+    /// Crash times within the window per family (the crash-loop guard).
+    recent_crashes: BTreeMap<&'static str, VecDeque<Instant>>,
 }
 
 impl Children {
@@ -64,11 +96,25 @@ impl Children {
             exe,
             children: Vec::new(),
             restarts: 0,
+            restarts_per_family: BTreeMap::new(),
+            recent_crashes: BTreeMap::new(),
         })
     }
 
     pub fn total_restarts(&self) -> u64 {
         self.restarts
+    }
+
+    /// Restarts so far per [`ChildKind::family`] (families without a restart are absent).
+    pub fn restarts_per_family(&self) -> &BTreeMap<&'static str, u64> {
+        &self.restarts_per_family
+    }
+
+    fn log_path(&self, kind: ChildKind) -> std::path::PathBuf {
+        self.ctx
+            .run_dir
+            .join("logs")
+            .join(format!("{}.log", kind.name()))
     }
 
     pub fn spawn(&mut self, kind: ChildKind) -> anyhow::Result<()> {
@@ -86,11 +132,7 @@ impl Children {
     /// restarts). Its own process group keeps a terminal Ctrl-C away from it: the launcher
     /// decides the shutdown order.
     fn start(&self, kind: ChildKind, incarnation: u32) -> anyhow::Result<Child> {
-        let log_path = self
-            .ctx
-            .run_dir
-            .join("logs")
-            .join(format!("{}.log", kind.name()));
+        let log_path = self.log_path(kind);
         let log = File::options().create(true).append(true).open(&log_path)?;
         let mut command = Command::new(&self.exe);
         match kind {
@@ -126,23 +168,20 @@ impl Children {
         Ok(child)
     }
 
-    /// `Some(message)` if the learner or graph-service has exited (they are not restarted
-    /// here: their state would be lost; checkpoint-based restarts come with resume).
+    /// While starting: `Some(message)` if the learner or graph-service has exited before it
+    /// was ready (a broken setup; restarting it would only repeat the failure).
     pub fn check_services(&mut self) -> anyhow::Result<Option<String>> {
-        for child in &mut self.children {
-            if child.kind.restartable() {
+        for i in 0..self.children.len() {
+            let kind = self.children[i].kind;
+            if kind.stops_first() {
                 continue;
             }
-            if let Some(process) = &mut child.process {
+            if let Some(process) = &mut self.children[i].process {
                 if let Some(status) = process.try_wait()? {
                     return Ok(Some(format!(
-                        "{} exited unexpectedly ({status}); see {}",
-                        child.kind.name(),
-                        self.ctx
-                            .run_dir
-                            .join("logs")
-                            .join(format!("{}.log", child.kind.name()))
-                            .display()
+                        "{} exited while starting ({status}); see {}",
+                        kind.name(),
+                        self.log_path(kind).display()
                     )));
                 }
             }
@@ -150,35 +189,83 @@ impl Children {
         Ok(None)
     }
 
-    /// Restarts actors (and the evaluator) that have exited, each after a back-off that
-    /// doubles per crash.
-    pub fn restart_crashed_actors(&mut self) -> anyhow::Result<()> {
+    /// Notices every child that has exited and schedules its restart after a back-off that
+    /// doubles per crash of that process; starts those whose back-off is over. A crash beyond
+    /// the crash-loop guard's limit is an error that names the process and its log.
+    pub fn restart_crashed(&mut self) -> anyhow::Result<Restarts> {
         let now = Instant::now();
+        let mut tick = Restarts::default();
         for i in 0..self.children.len() {
             let kind = self.children[i].kind;
-            if !kind.restartable() {
-                continue;
-            }
             if let Some(process) = &mut self.children[i].process {
                 if let Some(status) = process.try_wait()? {
+                    self.children[i].process = None;
+                    tick.crashed += 1;
+                    self.note_crash(kind, &status.to_string(), now)?;
                     let child = &mut self.children[i];
                     let delay = backoff(child.incarnation);
-                    tracing::warn!("{} exited ({status}); restarting in {delay:?}", kind.name());
-                    child.process = None;
+                    tracing::warn!(
+                        process = %kind.name(), %status, incarnation = child.incarnation,
+                        "{} exited ({status}); restarting in {delay:?}", kind.name()
+                    );
                     child.restart_at = Some(now + delay);
                 }
             }
             if self.children[i].restart_at.is_some_and(|at| at <= now) {
-                let incarnation = self.children[i].incarnation + 1;
-                let process = self.start(kind, incarnation)?;
-                let child = &mut self.children[i];
-                child.process = Some(process);
-                child.incarnation = incarnation;
-                child.restart_at = None;
-                self.restarts += 1;
-                tracing::info!("{} restarted (incarnation {incarnation})", kind.name());
+                self.restart(i)?;
+                tick.restarted.push(kind);
             }
         }
+        Ok(tick)
+    }
+
+    /// Whether the learner and graph-service processes are running (none waits for a restart).
+    pub fn services_running(&self) -> bool {
+        self.children
+            .iter()
+            .filter(|c| !c.kind.stops_first())
+            .all(|c| c.process.is_some())
+    }
+
+    /// Counts a crash of `kind` in its family's window; past the limit, the crash loop error.
+    fn note_crash(&mut self, kind: ChildKind, status: &str, now: Instant) -> anyhow::Result<()> {
+        let run = &self.ctx.config.run;
+        let window = Duration::from_secs_f64(run.restart_window_mins * 60.0);
+        let crashes = self.recent_crashes.entry(kind.family()).or_default();
+        crashes.push_back(now);
+        while crashes
+            .front()
+            .is_some_and(|&t| now.duration_since(t) > window)
+        {
+            crashes.pop_front();
+        }
+        if crashes.len() > run.max_restarts as usize {
+            anyhow::bail!(
+                "crash loop: {} processes crashed {} times within {} min (run.max_restarts = {}); \
+                 the last was {} ({status}); see {}",
+                kind.family(),
+                crashes.len(),
+                run.restart_window_mins,
+                run.max_restarts,
+                kind.name(),
+                self.log_path(kind).display()
+            );
+        }
+        Ok(())
+    }
+
+    /// Starts the next incarnation of child `i`.
+    fn restart(&mut self, i: usize) -> anyhow::Result<()> {
+        let kind = self.children[i].kind;
+        let incarnation = self.children[i].incarnation + 1;
+        let process = self.start(kind, incarnation)?;
+        let child = &mut self.children[i];
+        child.process = Some(process);
+        child.incarnation = incarnation;
+        child.restart_at = None;
+        self.restarts += 1;
+        *self.restarts_per_family.entry(kind.family()).or_default() += 1;
+        tracing::info!(process = %kind.name(), incarnation, "{} restarted (incarnation {incarnation})", kind.name());
         Ok(())
     }
 
@@ -264,5 +351,81 @@ fn wait_or_kill(process: &mut Child, deadline: Instant, name: &str) {
                 return;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn children(max_restarts: u32) -> (Children, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!(
+            "asi-children-{}-{max_restarts}",
+            std::process::id()
+        ));
+        let mut config = protocol::Config::default();
+        config.run.max_restarts = max_restarts;
+        config.run.restart_window_mins = 10.0;
+        let ctx = RunContext {
+            config,
+            run_dir: dir.clone(),
+            run_id: protocol::RunId::new("t-1").unwrap(),
+            resume: false,
+        };
+        (Children::new(&ctx).unwrap(), dir)
+    }
+
+    #[test]
+    fn the_crash_loop_guard_allows_max_restarts_per_kind_and_names_the_process_and_log_beyond() {
+        let (mut children, dir) = children(2);
+        let now = Instant::now();
+        for _ in 0..2 {
+            children
+                .note_crash(ChildKind::Learner, "signal: 9", now)
+                .unwrap();
+        }
+        // Other kinds have budgets of their own; actors share one.
+        children
+            .note_crash(ChildKind::Actor(0), "signal: 9", now)
+            .unwrap();
+        children
+            .note_crash(ChildKind::Actor(1), "signal: 9", now)
+            .unwrap();
+        let err = children
+            .note_crash(ChildKind::Actor(0), "exit status: 3", now)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("actor processes crashed 3 times") && err.contains("actor-0.log"),
+            "{err}"
+        );
+        let err = children
+            .note_crash(ChildKind::Learner, "signal: 9", now)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("learner (signal: 9)") && err.contains("logs/learner.log"),
+            "{err}"
+        );
+        assert!(err.contains("run.max_restarts = 2"), "{err}");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn crashes_older_than_the_window_are_forgotten() {
+        let (mut children, dir) = children(1);
+        let window = Duration::from_secs(600);
+        let start = Instant::now();
+        children
+            .note_crash(ChildKind::GraphService, "signal: 9", start)
+            .unwrap();
+        let later = start + window + Duration::from_secs(1);
+        children
+            .note_crash(ChildKind::GraphService, "signal: 9", later)
+            .unwrap();
+        assert!(children
+            .note_crash(ChildKind::GraphService, "signal: 9", later)
+            .is_err());
+        let _ = std::fs::remove_dir_all(dir);
     }
 }

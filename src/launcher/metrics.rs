@@ -107,6 +107,21 @@ impl MetricsBook {
         self.rate.observe(self.get("learner/ingest/env_steps"));
     }
 
+    /// Drops every value of `process` (`learner`, `graph-service`): a restarted process starts
+    /// its own values afresh.
+    pub fn forget_process(&mut self, process: &str) {
+        let prefix = format!("{process}/");
+        self.values.retain(|key, _| !key.starts_with(&prefix));
+    }
+
+    /// `launcher/restarts_<family>`: restarts so far per process kind.
+    pub fn set_restarts(&mut self, per_family: &BTreeMap<&'static str, u64>) {
+        for (family, n) in per_family {
+            self.values
+                .insert(format!("launcher/restarts_{family}"), *n as f64);
+        }
+    }
+
     fn get(&self, key: &str) -> f64 {
         self.values.get(key).copied().unwrap_or(0.0)
     }

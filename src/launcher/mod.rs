@@ -1,5 +1,6 @@
 //! `asi train`: resolves the config once, spawns graph-service, learner and actors as separate
-//! processes, supervises them (a crashed actor comes back with back-off), shows progress,
+//! processes, supervises them (a crashed process comes back with back-off, up to the crash-loop
+//! guard `run.max_restarts`; see [`children`]), shows progress,
 //! writes metrics, and stops everything cleanly on Ctrl-C, SIGTERM or when the budget is spent.
 //!
 //! Shutdown order matters for "nothing lost": actors stop first (SIGTERM; they finish the chunk
@@ -117,16 +118,23 @@ fn supervise(
             return Ok(Ending::Signal);
         }
         book.record(&metrics_in.drain()?);
-        if let Some(failure) = children.check_services()? {
-            bail!(failure);
+        let restarts = children.restart_crashed()?;
+        if restarts.crashed > 0 {
+            // The dead process's ports would otherwise stay registered with its services.
+            clean_stale_resources(node);
         }
-        children.restart_crashed_actors()?;
+        for kind in restarts.restarted.iter().filter(|k| !k.stops_first()) {
+            // The dead incarnation's values (all drained during the back-off) would stand in
+            // for the restarted one's, e.g. a budget the restored learner has not reached yet.
+            book.forget_process(&kind.name());
+        }
+        book.set_restarts(children.restarts_per_family());
         book.show_progress(children.total_restarts());
         if last_flush.elapsed() >= interval {
             book.flush(children.total_restarts())?;
             last_flush = Instant::now();
         }
-        if book.budget_reached(&ctx.config) {
+        if children.services_running() && book.budget_reached(&ctx.config) {
             return Ok(Ending::BudgetReached);
         }
     }
@@ -138,7 +146,7 @@ fn shutdown(
     control: &protocol::transport::ValuePublisher<ControlMessage>,
     children: &mut Children,
 ) {
-    children.stop_kind(|k| k.restartable());
+    children.stop_kind(|k| k.stops_first());
     if let Err(err) = control.send(ControlMessage::new(1, ControlCommand::Stop)) {
         tracing::warn!("could not send Stop: {err:#}");
     }

@@ -43,6 +43,15 @@ pub struct RunConfig {
     /// How often the learner writes a checkpoint (also written at clean shutdown).
     /// Default 30. Unit: minutes. Source: ours.
     pub checkpoint_interval_mins: f64,
+    /// Crash-loop guard of `asi train`: how many times the launcher restarts crashed processes
+    /// of one kind (actors, evaluator, learner, graph-service) within
+    /// [`RunConfig::restart_window_mins`]; one more crash of that kind in the window stops the
+    /// run with an error naming the process and its log (0: the first crash stops the run).
+    /// Default 5. Unit: restarts. Source: ours.
+    pub max_restarts: u32,
+    /// The sliding window of [`RunConfig::max_restarts`]. Default 10. Unit: minutes.
+    /// Source: ours.
+    pub restart_window_mins: f64,
 }
 
 impl Default for RunConfig {
@@ -56,6 +65,8 @@ impl Default for RunConfig {
             max_env_steps: None,
             metrics_interval_secs: 5.0,
             checkpoint_interval_mins: 30.0,
+            max_restarts: 5,
+            restart_window_mins: 10.0,
         }
     }
 }
@@ -89,6 +100,7 @@ impl RunConfig {
             "run.checkpoint_interval_mins",
             self.checkpoint_interval_mins,
         );
+        c.positive("run.restart_window_mins", self.restart_window_mins);
     }
 }
 
