@@ -18,6 +18,8 @@
 //! Invariants:
 //! - Atomic: the files are written into `.tmp-ckpt-NNNNNN/`, synced, then the folder is renamed;
 //!   a folder named `ckpt-*` is complete. Only the newest [`KEEP`] checkpoints are kept.
+//!   The folder, checksum and safetensors work is the `ckpt` crate's (shared with the
+//!   graph-service's checkpoints).
 //! - All or nothing: a restore checks the manifest (versions, layout, config), then the size
 //!   and checksum of every file, then parses every file into a fresh learner; any problem is an
 //!   error naming the file, and no learner is returned.
@@ -30,9 +32,7 @@
 //! Extension: a new piece of state adds one [`Part`] to [`PARTS`] — a file name, a function
 //! that serialises it and one that restores it into a fresh learner.
 
-use std::collections::{BTreeMap, HashMap};
-use std::fs;
-use std::io::Write;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Tensor};
@@ -40,6 +40,9 @@ use protocol::{Config, PhiVersion, PolicyVersion, RunSchedule, PROTOCOL_VERSION}
 use rand_pcg::Pcg64Mcg;
 use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
+
+use ckpt::{array, meta, parse as parse_safetensors, serialize, FileError, TmpFolder};
+pub use ckpt::{checksum, FileEntry};
 
 use super::{IngestStats, Learner, PublishState};
 use crate::adam::{Adam, AdamState};
@@ -58,8 +61,6 @@ pub const MANIFEST: &str = "manifest.json";
 pub const KEEP: usize = 2;
 /// Folder name prefix of a complete checkpoint (`ckpt-` + 6-digit sequence number).
 const PREFIX: &str = "ckpt-";
-/// The safetensors metadata key of our metadata (a JSON object of strings).
-const META_KEY: &str = "asi_checkpoint";
 /// Folder name prefix of a checkpoint being written.
 const TMP_PREFIX: &str = ".tmp-ckpt-";
 
@@ -106,17 +107,6 @@ pub enum CheckpointError {
     Learner(#[from] LearnerError),
 }
 
-/// One file of a checkpoint, as listed in the manifest.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct FileEntry {
-    /// File name inside the checkpoint folder.
-    pub name: String,
-    /// Size in bytes.
-    pub bytes: u64,
-    /// [`checksum`] of the contents, 16 hex digits.
-    pub checksum: String,
-}
-
 /// `manifest.json`: what a checkpoint is and how to check it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -157,25 +147,6 @@ pub struct Checkpoint {
     pub manifest: Manifest,
 }
 
-/// 64-bit FNV-1a over the little-endian 8-byte words of `bytes` (then the remaining bytes one
-/// by one): a fast check against truncation and bit rot, not a cryptographic hash.
-pub fn checksum(bytes: &[u8]) -> u64 {
-    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-    let mut hash = OFFSET;
-    let words = bytes.chunks_exact(8);
-    let tail = words.remainder();
-    for word in words {
-        let mut w = [0u8; 8];
-        w.copy_from_slice(word);
-        hash = (hash ^ u64::from_le_bytes(w)).wrapping_mul(PRIME);
-    }
-    for &b in tail {
-        hash = (hash ^ u64::from(b)).wrapping_mul(PRIME);
-    }
-    hash ^ bytes.len() as u64
-}
-
 /// Fingerprint of the config sections that shape the learner's state — `env`, `hierarchy`,
 /// `learner`, `replay`, `encoder` — as [`checksum`] of their JSON. Other sections (run
 /// length, seeds, exploration, graph, evaluation, transport) may change on resume.
@@ -198,32 +169,15 @@ pub fn latest_checkpoint(dir: &Path) -> Result<Option<PathBuf>, CheckpointError>
 
 /// Complete checkpoints in `dir`, oldest first, with their sequence numbers.
 fn list_checkpoints(dir: &Path) -> Result<Vec<(u64, PathBuf)>, CheckpointError> {
-    let entries = match fs::read_dir(dir) {
-        Ok(entries) => entries,
-        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(source) => return Err(io_error(dir, source)),
-    };
-    let mut out = Vec::new();
-    for entry in entries {
-        let entry = entry.map_err(|source| io_error(dir, source))?;
-        let name = entry.file_name();
-        let Some(seq) = name
-            .to_str()
-            .and_then(|n| n.strip_prefix(PREFIX))
-            .and_then(|n| n.parse::<u64>().ok())
-        else {
-            continue;
-        };
-        out.push((seq, entry.path()));
-    }
-    out.sort();
-    Ok(out)
+    Ok(ckpt::list(dir, PREFIX)?)
 }
 
-fn io_error(path: &Path, source: std::io::Error) -> CheckpointError {
-    CheckpointError::Io {
-        path: path.to_path_buf(),
-        source,
+impl From<FileError> for CheckpointError {
+    fn from(err: FileError) -> Self {
+        match err {
+            FileError::Io { path, source } => CheckpointError::Io { path, source },
+            FileError::Corrupt { path, problem } => CheckpointError::Corrupt { path, problem },
+        }
     }
 }
 
@@ -327,44 +281,26 @@ impl Learner {
         if self.phi.is_active() || self.phi_store.is_frozen() {
             return Err(CheckpointError::RoundActive);
         }
-        fs::create_dir_all(dir).map_err(|source| io_error(dir, source))?;
-        let existing = list_checkpoints(dir)?;
-        let sequence = existing.last().map_or(1, |(seq, _)| seq + 1);
-        let tmp = dir.join(format!("{TMP_PREFIX}{sequence:06}"));
-        if tmp.exists() {
-            fs::remove_dir_all(&tmp).map_err(|source| io_error(&tmp, source))?;
-        }
-        fs::create_dir(&tmp).map_err(|source| io_error(&tmp, source))?;
-        let mut files = Vec::with_capacity(PARTS.len());
+        let mut folder = TmpFolder::begin(dir, PREFIX, TMP_PREFIX)?;
         for part in PARTS {
-            let path = tmp.join(part.file);
-            let bytes = (part.save)(self).map_err(|problem| corrupt(&path, problem))?;
-            write_synced(&path, &bytes)?;
-            files.push(FileEntry {
-                name: part.file.to_owned(),
-                bytes: bytes.len() as u64,
-                checksum: format!("{:016x}", checksum(&bytes)),
-            });
+            let bytes = (part.save)(self)
+                .map_err(|problem| corrupt(&folder.path_of(part.file), problem))?;
+            folder.add(part.file, &bytes)?;
         }
         let manifest = Manifest {
             format_version: FORMAT_VERSION,
             protocol_version: PROTOCOL_VERSION,
             layout_hash: self.weights_layout_hash(),
             config_fingerprint: config_fingerprint(config),
-            sequence,
+            sequence: folder.sequence(),
             env_steps: self.stats.env_steps,
             updates_low: self.updates_low,
             updates_high: self.updates_high,
-            files,
+            files: folder.files().to_vec(),
         };
-        let manifest_path = tmp.join(MANIFEST);
         let json = serde_json::to_vec_pretty(&manifest)
-            .map_err(|e| corrupt(&manifest_path, e.to_string()))?;
-        write_synced(&manifest_path, &json)?;
-        let path = dir.join(format!("{PREFIX}{sequence:06}"));
-        fs::rename(&tmp, &path).map_err(|source| io_error(&path, source))?;
-        sync_dir(dir)?;
-        prune(existing, KEEP.saturating_sub(1))?;
+            .map_err(|e| corrupt(&folder.path_of(MANIFEST), e.to_string()))?;
+        let path = folder.commit(MANIFEST, &json, KEEP)?;
         Ok(Checkpoint { path, manifest })
     }
 
@@ -380,9 +316,9 @@ impl Learner {
         // The episode length only derives the replay ratio, which the state file restores;
         // the seed only initialises weights and generators, which are all restored.
         let mut learner = Learner::with_episode_length(config, dims, 1, 0)?;
-        let manifest = read_manifest(path)?;
+        let manifest: Manifest = ckpt::read_manifest(path, MANIFEST)?;
         check_compatible(&learner, config, &manifest, &path.join(MANIFEST))?;
-        let blobs = read_files(path, &manifest)?;
+        let blobs = ckpt::read_checked(path, &manifest.files, &path.join(MANIFEST))?;
         for part in PARTS {
             let file = path.join(part.file);
             let bytes = blobs
@@ -412,36 +348,6 @@ impl Learner {
             None => Ok(None),
         }
     }
-}
-
-/// Writes `bytes` to a new file at `path` and syncs it.
-fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
-    let mut file = fs::File::create(path).map_err(|source| io_error(path, source))?;
-    file.write_all(bytes)
-        .and_then(|()| file.sync_all())
-        .map_err(|source| io_error(path, source))
-}
-
-/// Syncs a folder so a rename inside it is durable.
-fn sync_dir(dir: &Path) -> Result<(), CheckpointError> {
-    fs::File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(|source| io_error(dir, source))
-}
-
-/// Removes the oldest of `existing` (oldest first) until `keep` remain.
-fn prune(existing: Vec<(u64, PathBuf)>, keep: usize) -> Result<(), CheckpointError> {
-    let n_remove = existing.len().saturating_sub(keep);
-    for (_, path) in existing.into_iter().take(n_remove) {
-        fs::remove_dir_all(&path).map_err(|source| io_error(&path, source))?;
-    }
-    Ok(())
-}
-
-fn read_manifest(dir: &Path) -> Result<Manifest, CheckpointError> {
-    let path = dir.join(MANIFEST);
-    let bytes = fs::read(&path).map_err(|source| io_error(&path, source))?;
-    serde_json::from_slice(&bytes).map_err(|e| corrupt(&path, format!("unreadable manifest: {e}")))
 }
 
 /// Versions, layout and config of `manifest` against this learner's.
@@ -492,43 +398,6 @@ fn check_compatible(
     Ok(())
 }
 
-/// Every listed file, checked against its size and checksum.
-fn read_files(
-    dir: &Path,
-    manifest: &Manifest,
-) -> Result<HashMap<String, Vec<u8>>, CheckpointError> {
-    let mut out = HashMap::new();
-    for entry in &manifest.files {
-        if entry.name.contains(['/', '\\']) || entry.name.starts_with('.') {
-            return Err(corrupt(
-                &dir.join(MANIFEST),
-                format!("file name {:?} is not a plain file name", entry.name),
-            ));
-        }
-        let path = dir.join(&entry.name);
-        let bytes = fs::read(&path).map_err(|source| io_error(&path, source))?;
-        if bytes.len() as u64 != entry.bytes {
-            return Err(corrupt(
-                &path,
-                format!(
-                    "{} bytes, the manifest says {} (truncated?)",
-                    bytes.len(),
-                    entry.bytes
-                ),
-            ));
-        }
-        let sum = format!("{:016x}", checksum(&bytes));
-        if sum != entry.checksum {
-            return Err(corrupt(
-                &path,
-                format!("checksum {sum}, the manifest says {}", entry.checksum),
-            ));
-        }
-        out.insert(entry.name.clone(), bytes);
-    }
-    Ok(out)
-}
-
 /// Safetensors bytes of named f32 arrays `(name, shape, data)` with string metadata.
 fn to_safetensors(
     arrays: Vec<(String, Vec<usize>, Vec<f32>)>,
@@ -542,60 +411,9 @@ fn to_safetensors(
     serialize(tensors, metadata)
 }
 
-/// Safetensors bytes of named tensors with string metadata.
-fn serialize(
-    tensors: Vec<(String, Tensor)>,
-    metadata: HashMap<String, String>,
-) -> Result<Vec<u8>, String> {
-    // One metadata entry holding sorted JSON: safetensors writes its metadata map in hash
-    // order, which would make equal states give different bytes.
-    let sorted: BTreeMap<String, String> = metadata.into_iter().collect();
-    let json = serde_json::to_string(&sorted).map_err(|e| e.to_string())?;
-    let metadata = HashMap::from([(META_KEY.to_owned(), json)]);
-    safetensors::serialize(tensors, Some(metadata)).map_err(|e| e.to_string())
-}
-
-/// The parsed file and its metadata.
-fn parse_safetensors(bytes: &[u8]) -> Result<(SafeTensors<'_>, HashMap<String, String>), String> {
-    let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| e.to_string())?;
-    let json = meta
-        .metadata()
-        .as_ref()
-        .and_then(|m| m.get(META_KEY))
-        .ok_or(format!("metadata `{META_KEY}` is missing"))?;
-    let metadata = serde_json::from_str(json).map_err(|e| format!("metadata: {e}"))?;
-    let st = SafeTensors::deserialize(bytes).map_err(|e| e.to_string())?;
-    Ok((st, metadata))
-}
-
 /// The f32 array `name` of `st`, checked to have `len` elements.
 fn f32_array(st: &SafeTensors, name: &str, len: usize) -> Result<Vec<f32>, String> {
-    let view = st
-        .tensor(name)
-        .map_err(|_| format!("tensor `{name}` is missing"))?;
-    if view.dtype() != safetensors::Dtype::F32 {
-        return Err(format!("tensor `{name}` is {:?}, not F32", view.dtype()));
-    }
-    let data = view.data();
-    if data.len() != len * 4 {
-        return Err(format!(
-            "tensor `{name}` has {} elements, expected {len}",
-            data.len() / 4
-        ));
-    }
-    Ok(data
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect())
-}
-
-/// A metadata value parsed from its string.
-fn meta<T: std::str::FromStr>(metadata: &HashMap<String, String>, key: &str) -> Result<T, String> {
-    metadata
-        .get(key)
-        .ok_or_else(|| format!("metadata `{key}` is missing"))?
-        .parse()
-        .map_err(|_| format!("metadata `{key}` = {:?} is not valid", metadata[key]))
+    array(st, name, Some(len))
 }
 
 /// Rows `0..len` of every column, the ring in metadata.

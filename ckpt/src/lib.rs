@@ -1,0 +1,528 @@
+//! Checkpoint folders on disk, shared by the learner (`learner::learner::checkpoint`) and the
+//! graph-service (`graph_service::checkpoint`); each writes its own parts and manifest, this
+//! crate does the file work both need.
+//!
+//! A checkpoint is a folder `<prefix>NNNNNN` (sequence number, 6 digits) holding files and a
+//! manifest that lists each file with its size and [`checksum`]. Invariants:
+//! - Atomic: [`TmpFolder`] writes every file into a hidden `<tmp_prefix>NNNNNN` folder, syncs
+//!   it, then renames it; a folder named `<prefix>N` is complete. A temporary folder left by an
+//!   interrupted write is never read, and is removed by the next write of the same number.
+//! - Checked: [`read_checked`] refuses a file whose size or checksum differs from its entry.
+//! - Rotation: after a commit only the newest `keep` checkpoints remain.
+//!
+//! The safetensors helpers write string metadata as one sorted JSON entry ([`META_KEY`]), so
+//! equal states give equal bytes, and read typed 1-D arrays back with their length checked.
+
+use std::borrow::Cow;
+use std::collections::{BTreeMap, HashMap};
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use safetensors::{Dtype, SafeTensors, View};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+/// The safetensors metadata key of our metadata (a JSON object of strings).
+pub const META_KEY: &str = "asi_checkpoint";
+
+/// Why a checkpoint folder could not be written or read.
+#[derive(Debug, thiserror::Error)]
+pub enum FileError {
+    /// A file or folder could not be read or written.
+    #[error("checkpoint {}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file is missing, truncated, fails its checksum or holds something unexpected.
+    #[error("checkpoint file {} is corrupt: {problem}", path.display())]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        problem: String,
+    },
+}
+
+/// [`FileError::Io`] of `path`.
+pub fn io_error(path: &Path, source: std::io::Error) -> FileError {
+    FileError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// [`FileError::Corrupt`] of `path`.
+pub fn corrupt(path: &Path, problem: impl Into<String>) -> FileError {
+    FileError::Corrupt {
+        path: path.to_path_buf(),
+        problem: problem.into(),
+    }
+}
+
+/// One file of a checkpoint, as listed in its manifest.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    /// File name inside the checkpoint folder.
+    pub name: String,
+    /// Size in bytes.
+    pub bytes: u64,
+    /// [`checksum`] of the contents, 16 hex digits.
+    pub checksum: String,
+}
+
+impl FileEntry {
+    /// The entry of a file `name` holding `bytes`.
+    pub fn of(name: &str, bytes: &[u8]) -> Self {
+        Self {
+            name: name.to_owned(),
+            bytes: bytes.len() as u64,
+            checksum: format!("{:016x}", checksum(bytes)),
+        }
+    }
+}
+
+/// 64-bit FNV-1a over the little-endian 8-byte words of `bytes` (then the remaining bytes one
+/// by one): a fast check against truncation and bit rot, not a cryptographic hash.
+pub fn checksum(bytes: &[u8]) -> u64 {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let mut hash = OFFSET;
+    let words = bytes.chunks_exact(8);
+    let tail = words.remainder();
+    for word in words {
+        let mut w = [0u8; 8];
+        w.copy_from_slice(word);
+        hash = (hash ^ u64::from_le_bytes(w)).wrapping_mul(PRIME);
+    }
+    for &b in tail {
+        hash = (hash ^ u64::from(b)).wrapping_mul(PRIME);
+    }
+    hash ^ bytes.len() as u64
+}
+
+/// Complete checkpoints `<prefix>N` in `dir`, oldest first, with their sequence numbers;
+/// empty when `dir` does not exist.
+pub fn list(dir: &Path, prefix: &str) -> Result<Vec<(u64, PathBuf)>, FileError> {
+    let entries = match fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(source) => return Err(io_error(dir, source)),
+    };
+    let mut out = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|source| io_error(dir, source))?;
+        let name = entry.file_name();
+        let Some(seq) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(prefix))
+            .and_then(|n| n.parse::<u64>().ok())
+        else {
+            continue;
+        };
+        out.push((seq, entry.path()));
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// A checkpoint being written: a temporary folder that [`TmpFolder::commit`] renames.
+#[derive(Debug)]
+pub struct TmpFolder {
+    dir: PathBuf,
+    prefix: String,
+    tmp: PathBuf,
+    sequence: u64,
+    existing: Vec<(u64, PathBuf)>,
+    files: Vec<FileEntry>,
+}
+
+impl TmpFolder {
+    /// Starts checkpoint N+1 in `dir` (created if missing), N the newest `<prefix>N` there, in
+    /// `<tmp_prefix>N+1` (a leftover folder of that name, from an interrupted write, is
+    /// removed first).
+    pub fn begin(dir: &Path, prefix: &str, tmp_prefix: &str) -> Result<Self, FileError> {
+        fs::create_dir_all(dir).map_err(|source| io_error(dir, source))?;
+        let existing = list(dir, prefix)?;
+        let sequence = existing.last().map_or(1, |(seq, _)| seq + 1);
+        let tmp = dir.join(format!("{tmp_prefix}{sequence:06}"));
+        if tmp.exists() {
+            fs::remove_dir_all(&tmp).map_err(|source| io_error(&tmp, source))?;
+        }
+        fs::create_dir(&tmp).map_err(|source| io_error(&tmp, source))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            prefix: prefix.to_owned(),
+            tmp,
+            sequence,
+            existing,
+            files: Vec::new(),
+        })
+    }
+
+    /// Sequence number of the checkpoint being written.
+    pub fn sequence(&self) -> u64 {
+        self.sequence
+    }
+
+    /// Where file `name` is being written.
+    pub fn path_of(&self, name: &str) -> PathBuf {
+        self.tmp.join(name)
+    }
+
+    /// Writes file `name` (synced) and lists it.
+    pub fn add(&mut self, name: &str, bytes: &[u8]) -> Result<(), FileError> {
+        write_synced(&self.tmp.join(name), bytes)?;
+        self.files.push(FileEntry::of(name, bytes));
+        Ok(())
+    }
+
+    /// The files written so far, in order.
+    pub fn files(&self) -> &[FileEntry] {
+        &self.files
+    }
+
+    /// Writes the manifest `manifest_name`, renames the folder to `<prefix>N`, syncs `dir`,
+    /// then removes all but the newest `keep` checkpoints (this one included). Returns the
+    /// checkpoint's folder.
+    pub fn commit(
+        self,
+        manifest_name: &str,
+        manifest: &[u8],
+        keep: usize,
+    ) -> Result<PathBuf, FileError> {
+        write_synced(&self.tmp.join(manifest_name), manifest)?;
+        let path = self
+            .dir
+            .join(format!("{}{:06}", self.prefix, self.sequence));
+        fs::rename(&self.tmp, &path).map_err(|source| io_error(&path, source))?;
+        sync_dir(&self.dir)?;
+        prune(self.existing, keep.saturating_sub(1))?;
+        Ok(path)
+    }
+}
+
+/// Writes `bytes` to a new file at `path` and syncs it.
+fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
+    let mut file = fs::File::create(path).map_err(|source| io_error(path, source))?;
+    file.write_all(bytes)
+        .and_then(|()| file.sync_all())
+        .map_err(|source| io_error(path, source))
+}
+
+/// Syncs a folder so a rename inside it is durable.
+fn sync_dir(dir: &Path) -> Result<(), FileError> {
+    fs::File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(|source| io_error(dir, source))
+}
+
+/// Removes the oldest of `existing` (oldest first) until `keep` remain.
+fn prune(existing: Vec<(u64, PathBuf)>, keep: usize) -> Result<(), FileError> {
+    let n_remove = existing.len().saturating_sub(keep);
+    for (_, path) in existing.into_iter().take(n_remove) {
+        fs::remove_dir_all(&path).map_err(|source| io_error(&path, source))?;
+    }
+    Ok(())
+}
+
+/// The JSON manifest `name` of the checkpoint folder `dir`.
+pub fn read_manifest<M: DeserializeOwned>(dir: &Path, name: &str) -> Result<M, FileError> {
+    let path = dir.join(name);
+    let bytes = fs::read(&path).map_err(|source| io_error(&path, source))?;
+    serde_json::from_slice(&bytes).map_err(|e| corrupt(&path, format!("unreadable manifest: {e}")))
+}
+
+/// Every file of `files` in `dir`, checked against its size and checksum, by name;
+/// `manifest` (the manifest's path) is named when an entry is not a plain file name.
+pub fn read_checked(
+    dir: &Path,
+    files: &[FileEntry],
+    manifest: &Path,
+) -> Result<HashMap<String, Vec<u8>>, FileError> {
+    let mut out = HashMap::new();
+    for entry in files {
+        if entry.name.contains(['/', '\\']) || entry.name.starts_with('.') {
+            return Err(corrupt(
+                manifest,
+                format!("file name {:?} is not a plain file name", entry.name),
+            ));
+        }
+        let path = dir.join(&entry.name);
+        let bytes = fs::read(&path).map_err(|source| io_error(&path, source))?;
+        if bytes.len() as u64 != entry.bytes {
+            return Err(corrupt(
+                &path,
+                format!(
+                    "{} bytes, the manifest says {} (truncated?)",
+                    bytes.len(),
+                    entry.bytes
+                ),
+            ));
+        }
+        let sum = format!("{:016x}", checksum(&bytes));
+        if sum != entry.checksum {
+            return Err(corrupt(
+                &path,
+                format!("checksum {sum}, the manifest says {}", entry.checksum),
+            ));
+        }
+        out.insert(entry.name.clone(), bytes);
+    }
+    Ok(out)
+}
+
+/// Safetensors bytes of named tensors with string metadata (stored as one sorted JSON
+/// entry under [`META_KEY`]).
+pub fn serialize<V: View>(
+    tensors: Vec<(String, V)>,
+    metadata: HashMap<String, String>,
+) -> Result<Vec<u8>, String> {
+    // Sorted: safetensors writes its metadata map in hash order, which would make equal
+    // states give different bytes.
+    let sorted: BTreeMap<String, String> = metadata.into_iter().collect();
+    let json = serde_json::to_string(&sorted).map_err(|e| e.to_string())?;
+    let metadata = HashMap::from([(META_KEY.to_owned(), json)]);
+    safetensors::serialize(tensors, Some(metadata)).map_err(|e| e.to_string())
+}
+
+/// The parsed safetensors file and its metadata (written by [`serialize`]).
+pub fn parse(bytes: &[u8]) -> Result<(SafeTensors<'_>, HashMap<String, String>), String> {
+    let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| e.to_string())?;
+    let json = meta
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get(META_KEY))
+        .ok_or(format!("metadata `{META_KEY}` is missing"))?;
+    let metadata = serde_json::from_str(json).map_err(|e| format!("metadata: {e}"))?;
+    let st = SafeTensors::deserialize(bytes).map_err(|e| e.to_string())?;
+    Ok((st, metadata))
+}
+
+/// A metadata value parsed from its string.
+pub fn meta<T: std::str::FromStr>(
+    metadata: &HashMap<String, String>,
+    key: &str,
+) -> Result<T, String> {
+    let value = metadata
+        .get(key)
+        .ok_or_else(|| format!("metadata `{key}` is missing"))?;
+    value
+        .parse()
+        .map_err(|_| format!("metadata `{key}` = {value:?} is not valid"))
+}
+
+/// A number type stored in safetensors arrays (little-endian).
+pub trait Element: Copy {
+    /// Its safetensors dtype.
+    const DTYPE: Dtype;
+    /// Bytes per element.
+    const SIZE: usize;
+    /// Appends its little-endian bytes.
+    fn put(self, out: &mut Vec<u8>);
+    /// Reads it from `SIZE` little-endian bytes.
+    fn get(bytes: &[u8]) -> Self;
+}
+
+macro_rules! element {
+    ($t:ty, $dtype:ident) => {
+        impl Element for $t {
+            const DTYPE: Dtype = Dtype::$dtype;
+            const SIZE: usize = std::mem::size_of::<$t>();
+            fn put(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes());
+            }
+            fn get(bytes: &[u8]) -> Self {
+                let mut b = [0u8; std::mem::size_of::<$t>()];
+                b.copy_from_slice(bytes);
+                <$t>::from_le_bytes(b)
+            }
+        }
+    };
+}
+
+element!(u8, U8);
+element!(u32, U32);
+element!(u64, U64);
+element!(i32, I32);
+element!(i64, I64);
+element!(f32, F32);
+element!(f64, F64);
+
+/// A tensor to serialise: dtype, shape and little-endian bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Array {
+    dtype: Dtype,
+    shape: Vec<usize>,
+    data: Vec<u8>,
+}
+
+impl Array {
+    /// The array of `values` with `shape` (whose product must be the number of values, else
+    /// an error).
+    pub fn new<T: Element>(shape: Vec<usize>, values: &[T]) -> Result<Self, String> {
+        Self::from_iter(shape, values.iter().copied())
+    }
+
+    /// [`Array::new`] of the values an iterator yields.
+    pub fn from_iter<T: Element>(
+        shape: Vec<usize>,
+        values: impl IntoIterator<Item = T>,
+    ) -> Result<Self, String> {
+        let n: usize = shape.iter().product();
+        let mut data = Vec::with_capacity(n * T::SIZE);
+        for v in values {
+            v.put(&mut data);
+        }
+        if data.len() != n * T::SIZE {
+            return Err(format!(
+                "shape {shape:?} does not hold {} values",
+                data.len() / T::SIZE
+            ));
+        }
+        Ok(Self {
+            dtype: T::DTYPE,
+            shape,
+            data,
+        })
+    }
+
+    /// The 1-D array of `values`.
+    pub fn flat<T: Element>(values: &[T]) -> Self {
+        let mut data = Vec::with_capacity(values.len() * T::SIZE);
+        for &v in values {
+            v.put(&mut data);
+        }
+        Self {
+            dtype: T::DTYPE,
+            shape: vec![values.len()],
+            data,
+        }
+    }
+}
+
+impl View for &Array {
+    fn dtype(&self) -> Dtype {
+        self.dtype
+    }
+    fn shape(&self) -> &[usize] {
+        &self.shape
+    }
+    fn data(&self) -> Cow<'_, [u8]> {
+        Cow::Borrowed(&self.data)
+    }
+    fn data_len(&self) -> usize {
+        self.data.len()
+    }
+}
+
+/// The array `name` of `st` as `T`s, checked to have `len` elements (`None`: any length).
+pub fn array<T: Element>(
+    st: &SafeTensors,
+    name: &str,
+    len: Option<usize>,
+) -> Result<Vec<T>, String> {
+    let view = st
+        .tensor(name)
+        .map_err(|_| format!("tensor `{name}` is missing"))?;
+    if view.dtype() != T::DTYPE {
+        return Err(format!(
+            "tensor `{name}` is {:?}, not {:?}",
+            view.dtype(),
+            T::DTYPE
+        ));
+    }
+    let data = view.data();
+    let n = data.len() / T::SIZE;
+    if let Some(len) = len.filter(|&len| len != n) {
+        return Err(format!("tensor `{name}` has {n} elements, expected {len}"));
+    }
+    Ok(data.chunks_exact(T::SIZE).map(T::get).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("ckpt-test-{name}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        dir
+    }
+
+    #[test]
+    fn checksum_changes_with_any_flipped_byte_and_with_length() {
+        let bytes: Vec<u8> = (0..37u8).collect();
+        let sum = checksum(&bytes);
+        for i in 0..bytes.len() {
+            let mut flipped = bytes.clone();
+            flipped[i] ^= 0x10;
+            assert_ne!(checksum(&flipped), sum, "byte {i}");
+        }
+        assert_ne!(checksum(&bytes[..36]), sum);
+    }
+
+    #[test]
+    fn commits_are_numbered_rotated_and_leave_no_temporary_folder() {
+        let dir = scratch("rotate");
+        for seq in 1..=3u64 {
+            let mut folder = TmpFolder::begin(&dir, "ckpt-", ".tmp-ckpt-").unwrap();
+            assert_eq!(folder.sequence(), seq);
+            folder.add("a.bin", &[seq as u8; 5]).unwrap();
+            let files = folder.files().to_vec();
+            let path = folder.commit("manifest.json", b"{}", 2).unwrap();
+            let read = read_checked(&path, &files, &path.join("manifest.json")).unwrap();
+            assert_eq!(read["a.bin"], vec![seq as u8; 5]);
+        }
+        let names: Vec<_> = list(&dir, "ckpt-")
+            .unwrap()
+            .into_iter()
+            .map(|(s, _)| s)
+            .collect();
+        assert_eq!(names, vec![2, 3]);
+        assert_eq!(fs::read_dir(&dir).unwrap().count(), 2);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_file_that_differs_from_its_entry_is_refused() {
+        let dir = scratch("corrupt");
+        let mut folder = TmpFolder::begin(&dir, "ckpt-", ".tmp-ckpt-").unwrap();
+        folder.add("a.bin", b"0123456789").unwrap();
+        let files = folder.files().to_vec();
+        let path = folder.commit("manifest.json", b"{}", 2).unwrap();
+        fs::write(path.join("a.bin"), b"0123456780").unwrap();
+        let err = read_checked(&path, &files, &path.join("manifest.json")).unwrap_err();
+        assert!(err.to_string().contains("checksum"), "{err}");
+        fs::write(path.join("a.bin"), b"01234").unwrap();
+        let err = read_checked(&path, &files, &path.join("manifest.json")).unwrap_err();
+        assert!(err.to_string().contains("truncated"), "{err}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn arrays_round_trip_with_their_dtype_and_length_checked() {
+        let a = Array::new(vec![2, 2], &[1.5f64, -2.0, 3.0, 4.25]).unwrap();
+        let b = Array::flat(&[u64::MAX, 7]);
+        let metadata = HashMap::from([("k".to_owned(), "9".to_owned())]);
+        let bytes = serialize(vec![("a".to_owned(), &a), ("b".to_owned(), &b)], metadata).unwrap();
+        let (st, metadata) = parse(&bytes).unwrap();
+        assert_eq!(meta::<u32>(&metadata, "k"), Ok(9));
+        assert_eq!(
+            array::<f64>(&st, "a", Some(4)).unwrap(),
+            vec![1.5, -2.0, 3.0, 4.25]
+        );
+        assert_eq!(array::<u64>(&st, "b", None).unwrap(), vec![u64::MAX, 7]);
+        assert!(array::<u32>(&st, "b", None)
+            .unwrap_err()
+            .contains("not U32"));
+        assert!(array::<f64>(&st, "a", Some(3))
+            .unwrap_err()
+            .contains("expected 3"));
+        assert!(Array::new(vec![3], &[1u8, 2]).is_err());
+    }
+}
