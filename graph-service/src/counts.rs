@@ -22,7 +22,7 @@ pub struct OutOfRange {
 }
 
 /// Visit counts per cell.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct VisitCounts {
     grid: Grid,
     counts: HashMap<CellKey, u64>,
@@ -54,6 +54,13 @@ impl VisitCounts {
                 }
             }
         }
+    }
+
+    /// Every counted cell and its n(v), sorted by key (checkpoints).
+    pub fn entries(&self) -> Vec<(CellKey, u64)> {
+        let mut entries: Vec<_> = self.counts.iter().map(|(&k, &n)| (k, n)).collect();
+        entries.sort_unstable();
+        entries
     }
 
     /// Clears every count.

@@ -108,8 +108,26 @@ pub struct NegativeError {
     pub error: f32,
 }
 
+/// The contents of [`HessMaps`] as a checkpoint saves them: each map's cells sorted by key,
+/// and the counters.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct HessParts {
+    /// n(cell) of every visited cell.
+    pub visits: Vec<(CellKey, u64)>,
+    /// F(cell) of every cell with samples.
+    pub future: Vec<(CellKey, f64)>,
+    /// P(cell) of every cell with reports.
+    pub potential: Vec<(CellKey, f64)>,
+    /// Closed episodes stored since the last future-count recomputation.
+    pub episodes_since_future: u64,
+    /// Future-count recomputations so far.
+    pub n_future_recomputes: u64,
+    /// Reach samples accepted so far.
+    pub n_reach_samples: u64,
+}
+
 /// Visit counts, future counts and potential on the count grid (see the module doc).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct HessMaps {
     params: HessParams,
     grid: Grid,
@@ -136,6 +154,53 @@ impl HessMaps {
             n_future_recomputes: 0,
             n_reach_samples: 0,
         }
+    }
+
+    /// The maps' contents (checkpoints).
+    pub fn parts(&self) -> HessParts {
+        fn sorted<V: Copy>(map: &HashMap<CellKey, V>) -> Vec<(CellKey, V)> {
+            let mut cells: Vec<_> = map.iter().map(|(&k, &v)| (k, v)).collect();
+            cells.sort_unstable_by_key(|&(k, _)| k);
+            cells
+        }
+        HessParts {
+            visits: sorted(&self.visits),
+            future: sorted(&self.future),
+            potential: sorted(&self.potential),
+            episodes_since_future: self.episodes_since_future,
+            n_future_recomputes: self.n_future_recomputes,
+            n_reach_samples: self.n_reach_samples,
+        }
+    }
+
+    /// Maps with `params` and saved `parts`; the error names the first value that no map
+    /// could hold (a repeated cell, a zero visit count, a future count that is not finite and
+    /// positive, a potential that is not finite and ≥ 0).
+    pub fn from_parts(params: HessParams, parts: HessParts) -> Result<Self, String> {
+        fn map<V: Copy>(
+            name: &str,
+            cells: Vec<(CellKey, V)>,
+            valid: impl Fn(V) -> bool,
+        ) -> Result<HashMap<CellKey, V>, String> {
+            let n = cells.len();
+            let out: HashMap<CellKey, V> = cells.into_iter().filter(|&(_, v)| valid(v)).collect();
+            if out.len() != n {
+                return Err(format!("{name} map: a repeated cell or an invalid value"));
+            }
+            Ok(out)
+        }
+        let mut maps = Self::new(params);
+        maps.visits = map("visit", parts.visits, |n| n > 0)?;
+        maps.future = map("future-count", parts.future, |f: f64| {
+            f.is_finite() && f > 0.0
+        })?;
+        maps.potential = map("potential", parts.potential, |p: f64| {
+            p.is_finite() && p >= 0.0
+        })?;
+        maps.episodes_since_future = parts.episodes_since_future;
+        maps.n_future_recomputes = parts.n_future_recomputes;
+        maps.n_reach_samples = parts.n_reach_samples;
+        Ok(maps)
     }
 
     /// The parameters.

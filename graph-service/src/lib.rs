@@ -15,6 +15,7 @@
 //!   split over scoped worker threads.
 //! - [`fused`]: the hand-fused CPU forward of φ's MLP that the mapping runs.
 //! - [`bench`]: synthetic stores and timings for `asi bench graph`.
+//! - [`checkpoint`]: [`GraphService::save`] / [`GraphService::restore`] (atomic folders).
 //! - [`server`]: [`GraphService::handle`], the request handler.
 //! - [`service`]: [`GraphService`] itself: ingest, weights, rebuild, queries, stats.
 //!
@@ -22,6 +23,7 @@
 //! never a panic, and leaves the state unchanged.
 
 pub mod bench;
+pub mod checkpoint;
 pub mod counts;
 pub mod dijkstra;
 pub mod error;

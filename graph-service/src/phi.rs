@@ -11,6 +11,9 @@
 //!
 //! Anything else is refused with both expected hashes named. Loading goes into a fresh
 //! parameter set, so a refused payload never touches the φ in use.
+//!
+//! A loaded φ keeps its encoder tensors as safetensors bytes ([`Phi::encoder_weights`]), which
+//! graph-service checkpoints save and [`PhiLoader::restore`] loads back (strictly).
 
 use candle_core::Device;
 use candle_nn::VarMap;
@@ -48,6 +51,8 @@ pub struct Phi {
     encoder: Encoder,
     fused: FusedMlp,
     version: PhiVersion,
+    /// The encoder tensors as safetensors bytes, when loaded by a [`PhiLoader`].
+    encoder_weights: Option<Vec<u8>>,
 }
 
 impl PhiLoader {
@@ -79,13 +84,33 @@ impl PhiLoader {
     pub fn load(&self, header: &WeightsHeader, bytes: &[u8]) -> Result<Phi, GraphServiceError> {
         let kind = self.payload_kind(header, bytes)?;
         let (params, set) = build_set(&self.spec, self.seed)?;
+        let encoder_params = nets::subset(&params, &[prefix::ENCODER])?;
         match kind {
             Payload::ActorSide => nets::load_safetensors_bytes(&params, bytes)?,
-            Payload::EncoderOnly => {
-                nets::load_safetensors_bytes(&nets::subset(&params, &[prefix::ENCODER])?, bytes)?
-            }
+            Payload::EncoderOnly => nets::load_safetensors_bytes(&encoder_params, bytes)?,
         }
-        Phi::new(set.encoder, header.phi_version)
+        let mut phi = Phi::new(set.encoder, header.phi_version)?;
+        phi.encoder_weights = Some(nets::to_safetensors_bytes(&encoder_params)?);
+        Ok(phi)
+    }
+
+    /// φ at `version` from encoder tensors saved by a checkpoint ([`Phi::encoder_weights`]),
+    /// loaded strictly (every tensor of this config's encoder, with its shape).
+    pub fn restore(
+        &self,
+        encoder_weights: &[u8],
+        version: PhiVersion,
+    ) -> Result<Phi, GraphServiceError> {
+        let (params, set) = build_set(&self.spec, self.seed)?;
+        nets::load_safetensors_bytes(&nets::subset(&params, &[prefix::ENCODER])?, encoder_weights)?;
+        let mut phi = Phi::new(set.encoder, version)?;
+        phi.encoder_weights = Some(encoder_weights.to_vec());
+        Ok(phi)
+    }
+
+    /// Layout hash of this config's encoder tensors alone.
+    pub fn encoder_hash(&self) -> u64 {
+        self.encoder_hash
     }
 
     fn payload_kind(
@@ -126,7 +151,13 @@ impl Phi {
             encoder,
             fused,
             version,
+            encoder_weights: None,
         })
+    }
+
+    /// The encoder tensors as safetensors bytes; `None` for a φ built with [`Phi::new`].
+    pub fn encoder_weights(&self) -> Option<&[u8]> {
+        self.encoder_weights.as_deref()
     }
 
     /// Version of these weights.

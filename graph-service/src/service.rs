@@ -95,9 +95,9 @@ pub struct GraphService {
     /// `graph.route_table_max_nodes`.
     route_table_max_nodes: usize,
     pub(crate) frontier_fraction: f64,
-    loader: PhiLoader,
-    phi: Option<Phi>,
-    store: TrajectoryStore,
+    pub(crate) loader: PhiLoader,
+    pub(crate) phi: Option<Phi>,
+    pub(crate) store: TrajectoryStore,
     pub(crate) counts: VisitCounts,
     pub(crate) hess: HessMaps,
     pub(crate) graph: Option<LatentGraph>,
@@ -356,6 +356,16 @@ impl GraphService {
             reach_samples: self.hess.n_reach_samples(),
             ..self.stats.clone()
         }
+    }
+
+    /// The trajectory store.
+    pub fn store(&self) -> &TrajectoryStore {
+        &self.store
+    }
+
+    /// The graph's visit counts n(v).
+    pub fn counts(&self) -> &VisitCounts {
+        &self.counts
     }
 
     /// The stored trajectories' (actor, episode) pairs, oldest first (for tests and tools).

@@ -87,6 +87,41 @@ impl Trajectory {
         self.closed
     }
 
+    /// Index the next chunk of this trajectory must have.
+    pub fn next_chunk(&self) -> u32 {
+        self.next_chunk
+    }
+
+    /// A trajectory from its saved parts (checkpoints); `None` unless `obs` holds
+    /// `latents.len()` rows of `obs_dim` floats.
+    pub fn from_parts(
+        head: TrajectoryHead,
+        obs_dim: usize,
+        obs: Vec<f32>,
+        latents: Vec<LatentPoint>,
+    ) -> Option<Self> {
+        (obs.len() == latents.len() * obs_dim).then_some(Self {
+            actor: head.actor,
+            episode: head.episode,
+            first_env_step: head.first_env_step,
+            obs,
+            latents,
+            next_chunk: head.next_chunk,
+            closed: head.closed,
+        })
+    }
+
+    /// Its bookkeeping, without the states.
+    pub fn head(&self) -> TrajectoryHead {
+        TrajectoryHead {
+            actor: self.actor,
+            episode: self.episode,
+            first_env_step: self.first_env_step,
+            next_chunk: self.next_chunk,
+            closed: self.closed,
+        }
+    }
+
     /// Whether `chunk` continues this trajectory.
     fn continues_with(&self, chunk: &ChunkStates) -> bool {
         !self.closed
@@ -96,8 +131,36 @@ impl Trajectory {
     }
 }
 
+/// A trajectory's bookkeeping (what a checkpoint saves beside its states).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TrajectoryHead {
+    /// Sending actor.
+    pub actor: ActorId,
+    /// Episode within the actor.
+    pub episode: EpisodeId,
+    /// Env step of the first state.
+    pub first_env_step: u64,
+    /// Index the next chunk must have.
+    pub next_chunk: u32,
+    /// Whether the episode's end was stored.
+    pub closed: bool,
+}
+
+/// A store's bookkeeping beside its trajectories (checkpoints).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StoreCounters {
+    /// Serial number of the oldest stored trajectory.
+    pub front_serial: u64,
+    /// Open trajectory of each (actor, episode) by serial, sorted by serial.
+    pub open: Vec<(ActorId, EpisodeId, u64)>,
+    /// States evicted so far.
+    pub n_evicted: u64,
+    /// Chunks that started a new trajectory without continuing their episode.
+    pub n_gaps: u64,
+}
+
 /// Stored trajectories, oldest first, bounded by a state cap.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TrajectoryStore {
     obs_dim: usize,
     max_states: u64,
@@ -124,6 +187,80 @@ impl TrajectoryStore {
             n_evicted: 0,
             n_gaps: 0,
         }
+    }
+
+    /// Floats per stored state.
+    pub fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+
+    /// The state cap (`graph.max_stored_steps`).
+    pub fn max_states(&self) -> u64 {
+        self.max_states
+    }
+
+    /// The bookkeeping a checkpoint saves beside the trajectories.
+    pub fn counters(&self) -> StoreCounters {
+        let mut open: Vec<_> = self
+            .open
+            .iter()
+            .map(|(&(actor, episode), &serial)| (actor, episode, serial))
+            .collect();
+        open.sort_by_key(|&(_, _, serial)| serial);
+        StoreCounters {
+            front_serial: self.front_serial,
+            open,
+            n_evicted: self.n_evicted,
+            n_gaps: self.n_gaps,
+        }
+    }
+
+    /// A store restored from its trajectories (oldest first) and counters, for `obs_dim` and
+    /// `max_states`; the error says which invariant the parts break (states over the cap, a
+    /// trajectory of another width, an open entry that is not an open trajectory of its
+    /// episode).
+    pub fn from_parts(
+        obs_dim: usize,
+        max_states: u64,
+        trajectories: Vec<Trajectory>,
+        counters: StoreCounters,
+    ) -> Result<Self, String> {
+        let mut store = Self::new(obs_dim, max_states);
+        if let Some(t) = trajectories
+            .iter()
+            .find(|t| t.obs.len() != t.len() * obs_dim)
+        {
+            return Err(format!(
+                "trajectory of actor {} episode {} holds {} floats for {} states of {obs_dim}",
+                t.actor.0,
+                t.episode.0,
+                t.obs.len(),
+                t.len()
+            ));
+        }
+        store.n_states = trajectories.iter().map(|t| t.len() as u64).sum();
+        if store.n_states > store.max_states {
+            return Err(format!(
+                "{} stored states exceed the cap of {}",
+                store.n_states, store.max_states
+            ));
+        }
+        store.trajectories = trajectories.into();
+        store.front_serial = counters.front_serial;
+        for (actor, episode, serial) in counters.open {
+            let fits = store
+                .get(serial)
+                .is_some_and(|t| t.actor == actor && t.episode == episode && !t.closed);
+            if !fits || store.open.insert((actor, episode), serial).is_some() {
+                return Err(format!(
+                    "open entry (actor {}, episode {}, serial {serial}) is not an open trajectory of that episode",
+                    actor.0, episode.0
+                ));
+            }
+        }
+        store.n_evicted = counters.n_evicted;
+        store.n_gaps = counters.n_gaps;
+        Ok(store)
     }
 
     /// Stored states.

@@ -1,0 +1,314 @@
+//! Graph-service checkpoints: a round trip restores the store, counts, maps and φ and gives
+//! the same answers; damaged, incompatible and half-written checkpoints are refused or ignored.
+
+mod common;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use common::*;
+use graph_service::checkpoint::{CheckpointError, Manifest, MANIFEST, SUBDIR};
+use graph_service::GraphService;
+use protocol::graph::{ReachSample, RouteAnswer, RouteQuery};
+use protocol::{GraphRequest, GraphResponse};
+
+/// A fresh scratch folder for one test.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("asi-graph-ckpt-{name}-{}", std::process::id()));
+    let _ = fs::remove_dir_all(&dir);
+    dir.join("checkpoints").join(SUBDIR)
+}
+
+/// Removes the scratch run folder of `dir` (made by [`scratch`]).
+fn remove(dir: &Path) {
+    let run = dir.parent().and_then(Path::parent).unwrap();
+    fs::remove_dir_all(run).unwrap();
+}
+
+/// A service with closed and open trajectories, a lost chunk, φ v2 (scale 2) loaded, states
+/// that arrived after the φ, reach reports and some answered requests; rebuilt at the end so
+/// its graph holds every stored state.
+fn busy_service() -> GraphService {
+    let config = config();
+    let mut s = service(&config);
+    let arms = [(1, 0), (-1, 0), (0, 1), (0, -1)];
+    for (episode, (dx, dy)) in arms.into_iter().enumerate() {
+        let arm: Vec<_> = (0..=4).map(|i| at(i * dx, i * dy)).collect();
+        ingest_episode(&mut s, 0, episode as u64, &arm);
+    }
+    // An open trajectory, then a chunk of another episode of actor 1 after a lost one.
+    let mut open = Chunk::new(1, 9);
+    open.end = false;
+    let (h, p) = open.encode(&[at(3, 3), at(3, 4), at(4, 4)]);
+    s.ingest(&h, &p).unwrap();
+    let mut late = Chunk::new(1, 10);
+    late.chunk_index = 2;
+    late.first_env_step = 40;
+    let (h, p) = late.encode(&[at(6, 6), at(6, 7)]);
+    s.ingest(&h, &p).unwrap();
+    let (h, p) = weights(&actor_side_params(&config, 2.0), 2);
+    s.load_weights(&h, &p).unwrap();
+    ingest_episode(&mut s, 2, 0, &[at(1, 1), at(1, 2), at(2, 2)]);
+    let report = GraphRequest::ReportReaching {
+        samples: vec![
+            ReachSample {
+                subgoal: [2.5, 0.5],
+                error: 1.5,
+            },
+            ReachSample {
+                subgoal: [-7.0, 0.5],
+                error: 0.25,
+            },
+        ],
+    };
+    ask(&mut s, &report);
+    ask(&mut s, &GraphRequest::FrontierRoute { from: [0.5, 0.5] });
+    s.rebuild();
+    s
+}
+
+/// The bodies of a fixed list of requests (frontier, routes, explore, least visited), at
+/// points in φ-space (φ = 2·xy: the arms' cells are (1, 1), (3, 1), … (9, 1) and so on).
+fn answers(s: &mut GraphService) -> Vec<Option<GraphResponse>> {
+    let requests = [
+        GraphRequest::FrontierRoute { from: [1.5, 1.5] },
+        GraphRequest::FrontierRoute { from: [5.5, 1.5] },
+        GraphRequest::Routes {
+            queries: vec![
+                RouteQuery {
+                    start: [1.5, 1.5],
+                    end: [9.5, 1.5],
+                    fallback_origin: None,
+                },
+                RouteQuery {
+                    start: [1.5, 1.5],
+                    end: [40.0, 40.0],
+                    fallback_origin: Some([1.5, 1.5]),
+                },
+            ],
+        },
+        GraphRequest::ExploreSubgoal {
+            from: [2.0, 2.0],
+            episode: 3,
+        },
+        GraphRequest::ExploreSubgoal {
+            from: [2.0, 2.0],
+            episode: 1_000,
+        },
+        GraphRequest::LeastVisited {
+            candidates: vec![[1.5, 1.5], [5.5, 5.5], [9.5, 1.5]],
+        },
+    ];
+    requests.iter().map(|r| ask(s, r).1).collect()
+}
+
+#[test]
+fn a_restored_service_holds_the_same_state_and_gives_the_same_answers() {
+    let dir = scratch("round-trip");
+    let config = config();
+    let mut original = busy_service();
+    let ckpt = original.save(&dir).unwrap();
+    assert_eq!(ckpt.manifest.sequence, 1);
+    assert_eq!(ckpt.manifest.phi_version, 2);
+    let (mut restored, from) = GraphService::restore(&ckpt.path, &config, dims()).unwrap();
+    assert_eq!(from, ckpt);
+    assert_eq!(restored.store(), original.store());
+    assert_eq!(restored.counts(), original.counts());
+    assert_eq!(restored.hess(), original.hess());
+    assert_eq!(restored.phi_version(), original.phi_version());
+    let (a, b) = (original.stats(), restored.stats());
+    assert_eq!(
+        b.graph_version,
+        a.graph_version + 1,
+        "the restore rebuilds the graph"
+    );
+    assert_eq!(
+        graph_service::GraphStats {
+            graph_version: 0,
+            ..b
+        },
+        graph_service::GraphStats {
+            graph_version: 0,
+            ..a.clone()
+        }
+    );
+    assert!(
+        a.reach_samples == 2 && a.chunk_gaps == 1 && a.stored_steps > 20,
+        "{a:?}"
+    );
+    let expected = answers(&mut original);
+    assert!(
+        matches!(expected[0], Some(GraphResponse::FrontierRoute(Ok(_))))
+            && matches!(expected[1], Some(GraphResponse::FrontierRoute(Ok(_))))
+            && matches!(&expected[2], Some(GraphResponse::Routes(r)) if matches!(r[0], RouteAnswer::Direct(_)))
+            && matches!(expected[3], Some(GraphResponse::ExploreSubgoal { .. })),
+        "{expected:?}"
+    );
+    assert_eq!(answers(&mut restored), expected);
+    // The same φ: a chunk labelled with another φ version is mapped alike by both.
+    let mut chunk = Chunk::new(3, 0);
+    chunk.phi_version = 1;
+    let (h, p) = chunk.encode(&[at(5, 5), at(5, 6)]);
+    original.ingest(&h, &p).unwrap();
+    restored.ingest(&h, &p).unwrap();
+    assert_eq!(restored.store(), original.store());
+    assert_eq!(restored.visits([11.0, 11.0]), Some(1), "φ = 2·xy");
+    remove(&dir);
+}
+
+#[test]
+fn a_service_without_weights_round_trips_and_keeps_no_phi_file() {
+    let dir = scratch("no-phi");
+    let config = config();
+    let mut s = service(&config);
+    ingest_episode(&mut s, 0, 0, &[at(0, 0), at(1, 0), at(2, 0)]);
+    let ckpt = s.save(&dir).unwrap();
+    assert!(ckpt
+        .manifest
+        .files
+        .iter()
+        .all(|f| f.name != "phi.safetensors"));
+    let (restored, _) = GraphService::restore(&ckpt.path, &config, dims()).unwrap();
+    assert_eq!(restored.store(), s.store());
+    assert_eq!(restored.phi_version().0, 0);
+    assert_eq!(restored.graph().map(|g| g.n_nodes()), Some(3));
+    remove(&dir);
+}
+
+/// Saves `busy_service` into a fresh folder; returns the folder and checkpoint path.
+fn saved(name: &str) -> (PathBuf, PathBuf) {
+    let dir = scratch(name);
+    let ckpt = busy_service().save(&dir).unwrap();
+    (dir, ckpt.path)
+}
+
+fn restore_err(path: &Path) -> CheckpointError {
+    GraphService::restore(path, &config(), dims()).unwrap_err()
+}
+
+#[test]
+fn a_flipped_byte_is_refused_as_corrupt_naming_the_file() {
+    let (dir, path) = saved("flipped");
+    let file = path.join("store.safetensors");
+    let mut bytes = fs::read(&file).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x01;
+    fs::write(&file, bytes).unwrap();
+    match restore_err(&path) {
+        CheckpointError::Corrupt { path, problem } => {
+            assert_eq!(path, file);
+            assert!(problem.contains("checksum"), "{problem}");
+        }
+        other => panic!("expected Corrupt, got {other}"),
+    }
+    remove(&dir);
+}
+
+#[test]
+fn a_truncated_file_is_refused_as_corrupt() {
+    let (dir, path) = saved("truncated");
+    let file = path.join("maps.safetensors");
+    let bytes = fs::read(&file).unwrap();
+    fs::write(&file, &bytes[..bytes.len() - 7]).unwrap();
+    match restore_err(&path) {
+        CheckpointError::Corrupt { path, problem } => {
+            assert_eq!(path, file);
+            assert!(problem.contains("truncated"), "{problem}");
+        }
+        other => panic!("expected Corrupt, got {other}"),
+    }
+    // A truncated manifest is corrupt too.
+    let manifest = path.join(MANIFEST);
+    let text = fs::read(&manifest).unwrap();
+    fs::write(&manifest, &text[..text.len() / 2]).unwrap();
+    assert!(matches!(
+        restore_err(&path),
+        CheckpointError::Corrupt { .. }
+    ));
+    remove(&dir);
+}
+
+/// Rewrites the manifest of `path` through `edit`.
+fn edit_manifest(path: &Path, edit: impl FnOnce(&mut Manifest)) {
+    let file = path.join(MANIFEST);
+    let mut manifest: Manifest = serde_json::from_slice(&fs::read(&file).unwrap()).unwrap();
+    edit(&mut manifest);
+    fs::write(&file, serde_json::to_vec_pretty(&manifest).unwrap()).unwrap();
+}
+
+#[test]
+fn another_format_version_or_config_shape_is_refused_as_incompatible() {
+    let (dir, path) = saved("incompatible");
+    edit_manifest(&path, |m| m.format_version += 1);
+    match restore_err(&path) {
+        CheckpointError::Incompatible {
+            what,
+            expected,
+            found,
+            ..
+        } => {
+            assert_eq!(what, "format version");
+            assert_eq!(
+                found.parse::<u32>().unwrap(),
+                expected.parse::<u32>().unwrap() + 1
+            );
+        }
+        other => panic!("expected Incompatible, got {other}"),
+    }
+    edit_manifest(&path, |m| m.format_version -= 1);
+    assert!(GraphService::restore(&path, &config(), dims()).is_ok());
+    let mut other = config();
+    other.graph.cell_size = 2.0;
+    let err = GraphService::restore(&path, &other, dims()).unwrap_err();
+    assert!(
+        matches!(&err, CheckpointError::Incompatible { what, .. } if what == "graph.cell_size"),
+        "{err}"
+    );
+    assert!(err.to_string().contains("this run needs 2"), "{err}");
+    remove(&dir);
+}
+
+#[test]
+fn an_interrupted_write_leaves_the_previous_checkpoint_in_use() {
+    let dir = scratch("interrupted");
+    let config = config();
+    let mut s = busy_service();
+    let first = s.save(&dir).unwrap();
+    // A write of checkpoint 2 that died half-way: its temporary folder, partly filled.
+    let tmp = dir.join(".tmp-ckpt-000002");
+    fs::create_dir_all(&tmp).unwrap();
+    fs::write(tmp.join("store.safetensors"), b"half").unwrap();
+    let resumed = GraphService::restore_newest_valid(&dir, &config, dims()).unwrap();
+    let (restored, from) = resumed.restored.unwrap();
+    assert_eq!(from.path, first.path);
+    assert!(resumed.refused.is_empty());
+    assert_eq!(restored.store(), s.store());
+    // The next write replaces the leftover and keeps the newest two.
+    ingest_episode(&mut s, 5, 0, &[at(9, 9), at(9, 8)]);
+    let second = s.save(&dir).unwrap();
+    assert_eq!(second.manifest.sequence, 2);
+    assert!(!tmp.exists());
+    s.save(&dir).unwrap();
+    assert!(!first.path.exists(), "only the newest two are kept");
+    assert_eq!(fs::read_dir(&dir).unwrap().count(), 2);
+    remove(&dir);
+}
+
+#[test]
+fn a_damaged_newest_checkpoint_falls_back_to_the_previous_one() {
+    let dir = scratch("fallback");
+    let config = config();
+    let mut s = busy_service();
+    let first = s.save(&dir).unwrap();
+    ingest_episode(&mut s, 5, 0, &[at(9, 9), at(9, 8)]);
+    let second = s.save(&dir).unwrap();
+    fs::remove_file(second.path.join("state.json")).unwrap();
+    let resumed = GraphService::restore_newest_valid(&dir, &config, dims()).unwrap();
+    assert_eq!(resumed.restored.unwrap().1.path, first.path);
+    assert_eq!(resumed.refused.len(), 1);
+    assert_eq!(resumed.refused[0].0, second.path);
+    assert!(matches!(resumed.refused[0].1, CheckpointError::Io { .. }));
+    let empty = GraphService::restore_newest_valid(&dir.join("none"), &config, dims()).unwrap();
+    assert!(empty.restored.is_none() && empty.refused.is_empty());
+    remove(&dir);
+}
