@@ -3,6 +3,8 @@
 //! Prints, as `name: value` lines: the rebuild time for each store size (φ re-mapping with the
 //! fused forward on `--remap-threads` threads and its FLOP rate, graph construction,
 //! visit/future-count recount — timed separately; `--candle` adds the former candle re-map),
+//! the graph-service checkpoint of stores up to 2 M steps (`checkpoint_*`: size, write,
+//! restore),
 //! route query latency p50/p99 (wall time, and the querying thread's CPU time, which leaves out
 //! preemption on a loaded machine) on the graph of the first size (capped at
 //! `graph.max_nodes` = 5,000 nodes) — first searched per query (`route_dijkstra_*`), then
@@ -19,7 +21,7 @@ use anyhow::{bail, Context};
 use clap::Args;
 use graph_service::bench::{
     largest_component_fraction, quantile, random_phi, synthetic_store, time_candle_map,
-    time_rebuild, time_routes, RouteSample,
+    time_checkpoint, time_rebuild, time_routes, RouteSample,
 };
 use graph_service::dijkstra::shortest_paths;
 use graph_service::LatentGraph;
@@ -27,6 +29,9 @@ use protocol::Config;
 
 /// Observation size of the synthetic states (the Ant's).
 const OBS_DIM: usize = 29;
+/// Largest store whose graph-service checkpoint is timed (`checkpoint_*` lines: size, write,
+/// restore with the graph rebuild); writing holds a second copy of the store in memory.
+const CHECKPOINT_MAX_STEPS: u64 = 2_000_000;
 /// Script of the scipy side, relative to the repository root.
 const SCIPY_SCRIPT: &str = "scripts/bench_graph_scipy.py";
 
@@ -151,6 +156,18 @@ fn rebuild(
         "rebuild_{label}_total_secs: {:.3}",
         timing.map_secs + timing.build_secs + timing.counts_secs
     );
+    if size <= CHECKPOINT_MAX_STEPS {
+        let dir = temp_dir()?;
+        let ckpt = time_checkpoint(config, store, &dir);
+        std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
+        let ckpt = ckpt.context("graph-service checkpoint")?;
+        println!(
+            "checkpoint_{label}_mib: {:.1}",
+            ckpt.bytes as f64 / (1 << 20) as f64
+        );
+        println!("checkpoint_{label}_write_secs: {:.3}", ckpt.write_secs);
+        println!("checkpoint_{label}_restore_secs: {:.3}", ckpt.restore_secs);
+    }
     Ok(graph)
 }
 

@@ -14,7 +14,9 @@
 //! (the fused forward of [`crate::fused`] on `graph.remap_threads` threads), rebuild the graph,
 //! recount the visit counts and recompute HESS's future counts. The three parts are timed
 //! separately; [`time_candle_map`] times the former candle re-map for comparison.
+//! [`time_checkpoint`] times a graph-service checkpoint of such a store (write, restore).
 
+use std::path::Path;
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
@@ -24,6 +26,7 @@ use protocol::{ActorId, EpisodeId, LatentPoint, PhiVersion};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
+use crate::checkpoint::CheckpointError;
 use crate::counts::VisitCounts;
 use crate::error::GraphServiceError;
 use crate::frontier::route_between;
@@ -31,7 +34,7 @@ use crate::graph::{GraphBuilder, LatentGraph, NodeId};
 use crate::grid::Grid;
 use crate::hess::{HessMaps, HessParams};
 use crate::phi::Phi;
-use crate::service::remap;
+use crate::service::{remap, GraphService};
 use crate::store::{ChunkStates, TrajectoryStore};
 
 /// Largest xy step of the synthetic walks per env step, φ units.
@@ -203,6 +206,65 @@ pub fn time_candle_map(store: &TrajectoryStore, phi: &Phi) -> Result<f64, GraphS
         }
     }
     Ok(start.elapsed().as_secs_f64())
+}
+
+/// Size and timings of one graph-service checkpoint.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckpointTiming {
+    /// Stored states.
+    pub n_steps: u64,
+    /// Size of the checkpoint's files, bytes.
+    pub bytes: u64,
+    /// [`GraphService::save`], seconds (files written and synced, folder renamed).
+    pub write_secs: f64,
+    /// [`GraphService::restore`], seconds (files read and checked, state parsed and checked,
+    /// graph rebuilt).
+    pub restore_secs: f64,
+}
+
+/// Times a checkpoint of a service holding `store` (its visit counts and HESS maps counted,
+/// future counts computed, a seeded φ held) written into `dir` and restored from there; the
+/// restored store is checked equal to the saved one. `config.graph.max_stored_steps` is
+/// set to the store's cap.
+pub fn time_checkpoint(
+    config: &Config,
+    store: TrajectoryStore,
+    dir: &Path,
+) -> Result<CheckpointTiming, CheckpointError> {
+    let mut config = config.clone();
+    config.graph.max_stored_steps = store.max_states();
+    let dims = nets::TaskDims {
+        obs_dim: store.obs_dim(),
+        goal_dim: 2,
+        action_dim: 8,
+        action_scale: 1.0,
+    };
+    let mut service = GraphService::new(&config, dims, 0)?;
+    for trajectory in store.trajectories() {
+        service.counts.add(trajectory.latents());
+        service.hess.count(trajectory.latents());
+    }
+    service.hess.recompute_future(&store);
+    service.phi = Some(service.loader.seeded(PhiVersion(1))?);
+    service.store = store;
+    let start = Instant::now();
+    let ckpt = service.save(dir)?;
+    let write_secs = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    let (restored, _) = GraphService::restore(&ckpt.path, &config, dims)?;
+    let restore_secs = start.elapsed().as_secs_f64();
+    if restored.store() != service.store() {
+        return Err(GraphServiceError::Internal(
+            "the restored store differs from the saved one".to_owned(),
+        )
+        .into());
+    }
+    Ok(CheckpointTiming {
+        n_steps: service.store().n_states(),
+        bytes: ckpt.manifest.total_bytes(),
+        write_secs,
+        restore_secs,
+    })
 }
 
 /// One timed route query.

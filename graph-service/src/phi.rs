@@ -108,6 +108,18 @@ impl PhiLoader {
         Ok(phi)
     }
 
+    /// φ at `version` with this loader's seeded initial parameters (benchmarks, tests), its
+    /// encoder tensors kept like a loaded one's.
+    pub fn seeded(&self, version: PhiVersion) -> Result<Phi, GraphServiceError> {
+        let (params, set) = build_set(&self.spec, self.seed)?;
+        let mut phi = Phi::new(set.encoder, version)?;
+        phi.encoder_weights = Some(nets::to_safetensors_bytes(&nets::subset(
+            &params,
+            &[prefix::ENCODER],
+        )?)?);
+        Ok(phi)
+    }
+
     /// Layout hash of this config's encoder tensors alone.
     pub fn encoder_hash(&self) -> u64 {
         self.encoder_hash
