@@ -38,6 +38,9 @@ pub enum Command {
     Plot(PlotArgs),
     /// Query the live graph-service of a running training run.
     Graph(GraphArgs),
+    /// Evaluate the newest weights saved in a run folder on the test goal (deterministic, no
+    /// exploration); `--png` draws the episodes on the maze.
+    Eval(crate::eval_cmd::EvalArgs),
 }
 
 #[derive(Debug, Subcommand)]

@@ -5,6 +5,7 @@ mod bench;
 mod bench_graph;
 mod channels;
 mod cli;
+mod eval_cmd;
 mod graph_png;
 mod graph_tool;
 mod launcher;
@@ -13,6 +14,7 @@ mod proc;
 mod run;
 mod serial;
 mod tensorboard;
+mod weights_file;
 
 use std::process::ExitCode;
 
@@ -59,6 +61,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bench(args) => bench::run(args),
         Command::Graph(args) => graph_tool::run(&args),
         Command::Plot(args) => plot::run(&args),
+        Command::Eval(args) => eval_cmd::run(&args),
         Command::Tasks => {
             for name in envs::registry::task_names() {
                 println!("{name}");

@@ -5,9 +5,14 @@
 //! graph-service (HESS exploration, reaching reports) by calling its request handler directly,
 //! with the same encoded messages as in process mode, and so does the learner for its
 //! self-imitation routes. Evaluations run inline when they fall due (same schedule and outputs
-//! as the evaluator process).
+//! as the evaluator process). Checkpoints are written every `run.checkpoint_interval_mins` and
+//! at the end; SIGINT or SIGTERM ends the run after the actor round in hand with a last metrics
+//! line and a checkpoint. A resumed serial run continues the learner's state; the actors start
+//! new episodes (their open episodes and RNG states are not checkpointed), so it is not
+//! bit-identical to an uninterrupted run.
 
 use std::io::{BufWriter, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use actor::eval::Evaluator;
 use actor::{Actor, GraphTransport, ServiceOracle};
@@ -21,9 +26,28 @@ use crate::proc::actor::{actor_metrics, ReachMeans};
 use crate::proc::common::{task_info, CoverageTracker, GraphRoutes};
 use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
 use crate::run::RunContext;
+use crate::weights_file::WeightsSaver;
 
 /// Updates per `train` call while catching up with the replay ratio.
 const UPDATE_BURST: usize = 64;
+
+/// Set by SIGINT or SIGTERM: the loop stops after the actor round in hand, writes its last
+/// metrics line and a checkpoint, and exits 0 (as process mode does on a signal).
+static STOP_REQUESTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn request_stop(_signal: libc::c_int) {
+    STOP_REQUESTED.store(true, Ordering::Relaxed);
+}
+
+fn install_stop_handlers() {
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+        let previous = unsafe { libc::signal(signal, request_stop as *const () as libc::sighandler_t) };
+        if previous == libc::SIG_ERR {
+            tracing::warn!(signal, "could not install a stop handler; the signal will kill the run without a checkpoint");
+        }
+    }
+}
 
 pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
@@ -41,11 +65,18 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         std::fs::OpenOptions::new().create(true).write(true).append(ctx.resume).truncate(!ctx.resume).open(ctx.run_dir.join("metrics.jsonl"))?;
     let mut metrics = BufWriter::new(metrics_file);
     let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
-    let mut eval = SerialEval::new(config)?;
+    let mut eval = SerialEval::new(config, &ctx.run_dir)?;
     let mut coverage = CoverageTracker::new(config, task.layout)?;
     eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
     let mut last_episodes = 0;
+    let mut checkpoints = crate::run::CheckpointTimer::new(config);
+    install_stop_handlers();
+    let mut stopped = false;
     while !budget_reached(config, &learner) {
+        if STOP_REQUESTED.load(Ordering::Relaxed) {
+            stopped = true;
+            break;
+        }
         for (actor, line) in actors.iter_mut().zip(&mut actor_lines) {
             catch_up(&mut learner)?;
             let chunk = actor.next_chunk(&mut ServiceOracle::new(InProcessGraph(&mut graph)))?;
@@ -62,11 +93,19 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
             last_episodes = episodes;
         }
+        // Reads the learner only: the run's metrics do not depend on when checkpoints fall.
+        checkpoints.tick(&ctx, &learner);
     }
     write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
     metrics.flush()?;
+    eval.finish();
     crate::run::final_checkpoint(&ctx, &mut learner)?;
-    tracing::info!(env_steps = learner.progress().env_steps_ingested, "serial run finished");
+    let env_steps = learner.progress().env_steps_ingested;
+    if stopped {
+        tracing::info!(env_steps, "stopped by signal; checkpoint written, run folder {}", ctx.run_dir.display());
+    } else {
+        tracing::info!(env_steps, "serial run finished");
+    }
     Ok(())
 }
 
@@ -117,19 +156,23 @@ fn broadcast_weights(
 }
 
 /// The evaluator of serial mode: the process mode's schedule and outputs, run inline on the
-/// weights of the broadcast at which an evaluation falls due.
+/// weights of the broadcast at which an evaluation falls due. Like the evaluator process, it
+/// keeps the newest weights in `run_dir/weights/` for `asi eval`.
 struct SerialEval {
     evaluator: Option<Evaluator>,
     schedule: EvalSchedule,
     n_episodes: u32,
     /// The latest evaluation's metrics, repeated on every line (as the launcher keeps them).
     latest: Vec<(String, f64)>,
+    saver: WeightsSaver,
+    /// The newest broadcast, saved at the end of the run.
+    last_weights: Option<(protocol::WeightsHeader, Vec<u8>)>,
 }
 
 impl SerialEval {
-    fn new(config: &protocol::Config) -> anyhow::Result<Self> {
+    fn new(config: &protocol::Config, run_dir: &std::path::Path) -> anyhow::Result<Self> {
         let evaluator = if config.eval.n_episodes > 0 {
-            Some(Evaluator::new(config, config.run.seed ^ 0xE7A1).context("building the evaluator")?)
+            Some(Evaluator::new(config, crate::proc::evaluator::eval_seed(config)).context("building the evaluator")?)
         } else {
             None
         };
@@ -138,21 +181,35 @@ impl SerialEval {
             schedule: EvalSchedule::new(config.eval.interval_episodes),
             n_episodes: config.eval.n_episodes,
             latest: Vec::new(),
+            saver: WeightsSaver::new(run_dir),
+            last_weights: None,
         })
     }
 
     fn on_weights(&mut self, ctx: &RunContext, published: Option<(protocol::WeightsHeader, Vec<u8>)>) -> anyhow::Result<()> {
-        let (Some(evaluator), Some((header, bytes))) = (self.evaluator.as_mut(), published) else {
+        let Some((header, bytes)) = published else {
             return Ok(());
         };
-        let Some(index) = self.schedule.due(header.schedule.train_episodes) else {
-            return Ok(());
+        let due = match self.evaluator {
+            Some(_) => self.schedule.due(header.schedule.train_episodes),
+            None => None,
         };
-        evaluator.load_weights(&header, &bytes)?;
-        let report = evaluator.run(index, self.n_episodes)?;
-        append_report(ctx, &report, &header)?;
-        self.latest = eval_metrics(&report, &header, self.schedule.skipped(), 0);
+        self.saver.offer(&header, &bytes, due.is_some());
+        if let (Some(evaluator), Some(index)) = (self.evaluator.as_mut(), due) {
+            evaluator.load_weights(&header, &bytes)?;
+            let report = evaluator.run(index, self.n_episodes)?;
+            append_report(ctx, &report, &header)?;
+            self.latest = eval_metrics(&report, &header, self.schedule.skipped(), 0);
+        }
+        self.last_weights = Some((header, bytes));
         Ok(())
+    }
+
+    /// Saves the newest weights whatever the interval (end of the run).
+    fn finish(&mut self) {
+        if let Some((header, bytes)) = &self.last_weights {
+            self.saver.offer(header, bytes, true);
+        }
     }
 }
 

@@ -3,7 +3,9 @@
 //! passes the next multiple of `eval.interval_episodes`, evaluates the weights of that message:
 //! `eval.n_episodes` deterministic episodes on the task's test goal. Each result is published as
 //! metrics (`evaluator0/eval/*`, see docs/METRICS.md), appended to `run_dir/eval.jsonl`, and
-//! drawn as `run_dir/plots/eval_latest.png` (the maze with every evaluation trajectory).
+//! drawn as `run_dir/plots/eval_latest.png` (the maze with every evaluation trajectory). The
+//! newest weights it has seen are saved in `run_dir/weights/` for `asi eval`
+//! ([`crate::weights_file`]).
 //!
 //! An evaluation is done on the newest weights at the moment it falls due; when the learner
 //! crosses several multiples at once (a slow evaluator), the skipped ones are counted, not
@@ -20,6 +22,7 @@ use protocol::{ProcessRole, WeightsHeader};
 use super::common::{newest_weights, node, task_info, MetricsOut, StopWatch};
 use crate::channels::Channels;
 use crate::run::RunContext;
+use crate::weights_file::WeightsSaver;
 
 /// How long one wait for weights lasts before the stop conditions are re-checked.
 const WEIGHTS_WAIT: Duration = Duration::from_millis(200);
@@ -55,10 +58,17 @@ impl EvalSchedule {
     }
 }
 
+/// Seed of the evaluation episodes: derived from `run.seed`, apart from the actors' seeds.
+pub fn eval_seed(config: &protocol::Config) -> u64 {
+    config.run.seed ^ 0xE7A1
+}
+
 pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
     let info = task_info(config)?;
-    let mut evaluator = Evaluator::new(config, config.run.seed ^ 0xE7A1).context("building the evaluator")?;
+    let mut evaluator = Evaluator::new(config, eval_seed(config)).context("building the evaluator")?;
+    let mut saver = WeightsSaver::new(&ctx.run_dir);
+    let mut last_weights = None;
     let node = node(ctx, "evaluator")?;
     let channels = Channels::new(config, &ctx.run_id, &info.layout);
     let weights = channels.weights_subscriber(&node)?;
@@ -77,7 +87,10 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             let _ = weights.listener().timed_wait(|_| {}, WEIGHTS_WAIT);
             continue;
         };
-        let Some(index) = schedule.due(header.schedule.train_episodes) else {
+        let due = schedule.due(header.schedule.train_episodes);
+        saver.offer(&header, &bytes, due.is_some());
+        let Some(index) = due else {
+            last_weights = Some((header, bytes));
             continue;
         };
         if let Err(err) = evaluator.load_weights(&header, &bytes) {
@@ -103,7 +116,11 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
                 tracing::warn!("evaluation picture not drawn: {err}");
             }
         }
+        last_weights = Some((header, bytes));
     };
+    if let Some((header, bytes)) = &last_weights {
+        saver.offer(header, bytes, true);
+    }
     tracing::info!(reason, evaluations = schedule.done, skipped = schedule.skipped(), "evaluator stopping");
     ctx.write_status(
         "evaluator",
