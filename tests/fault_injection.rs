@@ -18,12 +18,16 @@
 //! So `lost = produced − ingested ≤ (P_last − R_last) + chunk_steps × (actor kills after the
 //! last learner restart)`; earlier losses (actor kills, the first learner restart) are inside
 //! `P_last − R_last` because the checkpoint holds only what the learner had then.
+//!
+//! A second test drives the crash-loop guard: past `run.max_restarts` crashes of one kind the
+//! launcher stops everything and exits non-zero, naming the process and its log.
 
 mod common;
 
 use std::cell::RefCell;
 use std::collections::BTreeSet;
 use std::path::Path;
+use std::sync::Mutex;
 use std::time::Instant;
 
 use common::*;
@@ -31,6 +35,8 @@ use rand::seq::SliceRandom;
 use rand::Rng;
 use serde_json::Value;
 
+/// One training run at a time on the two CI cores.
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 /// Env-step budget of the run (`run.max_env_steps`).
 const BUDGET: u64 = 15_000;
 /// `transport.chunk_steps` of `configs/smoke.toml`.
@@ -197,6 +203,7 @@ fn kill_and_wait(
 
 #[test]
 fn a_run_survives_sigkills_of_every_process_kind_and_loses_only_what_crashes_must_lose() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut rng = rand::rng();
     let plan = plan(&mut rng);
     let budget = format!("run.max_env_steps={BUDGET}");
@@ -395,4 +402,59 @@ fn print_figures(kills: &[Kill], wall_secs: f64) {
             kills.iter().filter(|k| f(&k.target)).count()
         );
     }
+}
+
+#[test]
+fn a_crash_loop_stops_the_run_with_an_error_naming_the_process_and_its_log() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut run = Run::start(
+        "crash-loop",
+        "configs/smoke.toml",
+        &[
+            "--actors",
+            "2",
+            "--set",
+            "run.max_episodes=1000000",
+            "--set",
+            "run.max_restarts=1",
+        ],
+    );
+    run.wait_for("the learner ingested data", |dir| {
+        (learner_steps_now(dir) > 0).then_some(())
+    });
+    let run_id = run.run_id();
+    let first = pid_of(&run.dir, "graph-service").unwrap();
+    signal(first, libc::SIGKILL);
+    let second = run.wait_for("graph-service restarted", |dir| {
+        pid_of(dir, "graph-service").filter(|&pid| pid != first)
+    });
+    signal(second, libc::SIGKILL);
+    let status = run.wait();
+    let output = run.launcher_output();
+    assert_eq!(
+        status.code(),
+        Some(1),
+        "non-zero exit after the crash loop:\n{output}"
+    );
+    assert!(
+        output.contains("crash loop: graph_service processes crashed 2 times")
+            && output.contains("run.max_restarts = 1")
+            && output.contains("logs/graph-service.log"),
+        "the error names the process and its log:\n{output}"
+    );
+    for pid in pids(&run.dir) {
+        // SAFETY: signal 0 only checks whether the pid exists.
+        let alive = unsafe { libc::kill(pid as libc::pid_t, 0) } == 0;
+        assert!(
+            !alive,
+            "process {pid} of the run still runs after the launcher gave up"
+        );
+    }
+    let learner = run.status("learner");
+    assert_eq!(
+        learner["stop_reason"], "stop requested",
+        "the learner was stopped cleanly: {learner}"
+    );
+    assert_eq!(services_of(&run_id), Vec::<String>::new());
+    assert_eq!(nodes_of(&run_id), Vec::<String>::new());
 }
