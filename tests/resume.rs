@@ -153,6 +153,11 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
         ["ckpt-000001"],
         "the clean stop wrote a checkpoint"
     );
+    let graph_before = dir.status("graph-service");
+    assert!(graph_before["restored_from"].is_null(), "{graph_before}");
+    assert!(as_u64(&graph_before, "checkpoints_written") >= 1, "{graph_before}");
+    let graph_ckpt = dir.0.join("checkpoints/graph-service/ckpt-000001");
+    assert!(graph_ckpt.join("manifest.json").exists(), "{graph_before}");
     let before = dir.status("learner");
     let (steps, updates) = (as_u64(&before, "env_steps"), as_u64(&before, "updates_low"));
     assert!(steps > 0 && updates > 0, "{before}");
@@ -196,6 +201,25 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
         "{lines:?}"
     );
     assert_eq!(dir.checkpoints(), ["ckpt-000001", "ckpt-000002"]);
+    // The graph-service started from its checkpoint: the store and counters went on.
+    let graph_after = dir.status("graph-service");
+    assert_eq!(
+        graph_after["restored_from"].as_str(),
+        graph_ckpt.to_str(),
+        "{graph_after}"
+    );
+    assert_eq!(
+        as_u64(&graph_after, "restored_stored_steps"),
+        as_u64(&graph_before, "stored_steps"),
+        "{graph_after}"
+    );
+    assert!(
+        as_u64(&graph_after, "chunks") > as_u64(&graph_before, "chunks"),
+        "chunk counter continued: {graph_before} → {graph_after}"
+    );
+    assert!(graph_after["refused_checkpoints"]
+        .as_array()
+        .is_some_and(Vec::is_empty));
 }
 
 #[test]

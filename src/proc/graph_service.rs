@@ -1,9 +1,20 @@
 //! `asi graph-service`: stores every trajectory chunk, follows φ as the learner publishes it,
 //! and answers graph requests. Sleeps on its channels' events.
+//!
+//! Checkpoints (`graph_service::checkpoint`): at start the service is restored from the newest
+//! usable checkpoint in `run_dir/checkpoints/graph-service/`, and it writes one every
+//! `run.checkpoint_interval_mins` and at a clean stop. Decision: a checkpoint that is refused
+//! (corrupt, truncated, incompatible) is logged with its error and the next older one is
+//! tried; when none is usable the service starts empty instead of failing. Unlike the
+//! learner's, its state is exploration data that new chunks rebuild, and a refusal to start
+//! would turn one bad file into a crash loop that stops the whole run. The status file says
+//! which checkpoint it started from and which were refused.
 
-use std::time::Duration;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use graph_service::checkpoint::{CheckpointError, Resumed, SUBDIR};
 use graph_service::GraphService;
 use iceoryx2::prelude::*;
 use protocol::transport::Ipc;
@@ -20,7 +31,9 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
     let task = task_info(config)?;
     let (dims, layout) = (task.dims, task.layout);
-    let mut service = GraphService::new(config, dims, config.run.seed).context("building the graph-service")?;
+    let dir = ctx.checkpoint_dir().join(SUBDIR);
+    let (mut service, start) = open_service(ctx, &dir, dims)?;
+    let mut checkpoints = Checkpoints::new(dir, config.run.checkpoint_interval_mins);
     let node = node(ctx, "graph-service")?;
     let channels = Channels::new(config, &ctx.run_id, &layout);
     let trajectories = channels.trajectory_subscriber(&node)?;
@@ -50,9 +63,11 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             let stats = service.stats();
             metrics.publish(stats.stored_steps, &graph_metrics(&stats));
         }
+        checkpoints.tick(&service);
     };
     ingest_all(&mut service, &trajectories);
     tracing::info!(reason, "graph-service stopping");
+    checkpoints.write(&service);
     let stats = service.stats();
     let per_actor: serde_json::Map<String, serde_json::Value> =
         stats.per_actor_steps.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v))).collect();
@@ -63,8 +78,110 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             "stored_steps": stats.stored_steps, "chunks": stats.chunks,
             "rejected_chunks": stats.rejected_chunks, "per_actor_steps": per_actor,
             "nodes": stats.n_nodes, "graph_version": stats.graph_version, "stop_reason": reason,
+            "restored_from": start.restored_from, "restored_stored_steps": start.restored_stored_steps,
+            "refused_checkpoints": start.refused, "checkpoints_written": checkpoints.written,
+            "last_checkpoint": checkpoints.last_path, "checkpoint_errors": checkpoints.errors,
         }),
     )
+}
+
+/// Where the service started from, for the log and the status file.
+struct Start {
+    /// The checkpoint restored, if any.
+    restored_from: Option<PathBuf>,
+    /// Stored states after the restore (0 when started empty).
+    restored_stored_steps: u64,
+    /// Refused checkpoints, newest first, as `path: error`.
+    refused: Vec<String>,
+}
+
+/// The service restored from the newest usable checkpoint in `dir`, else a new one (see the
+/// module doc for why a refused checkpoint does not stop the process).
+fn open_service(ctx: &RunContext, dir: &Path, dims: nets::TaskDims) -> anyhow::Result<(GraphService, Start)> {
+    let config = &ctx.config;
+    let clock = Instant::now();
+    let resumed = GraphService::restore_newest_valid(dir, config, dims).unwrap_or_else(|err: CheckpointError| {
+        Resumed { restored: None, refused: vec![(dir.to_path_buf(), err)] }
+    });
+    let refused: Vec<String> = resumed.refused.iter().map(|(path, err)| format!("{}: {err}", path.display())).collect();
+    for problem in &refused {
+        tracing::error!("graph-service checkpoint refused, trying an older one or starting empty: {problem}");
+    }
+    let Some((service, ckpt)) = resumed.restored else {
+        if !refused.is_empty() {
+            tracing::warn!("graph-service starting empty: no usable checkpoint in {}", dir.display());
+        }
+        let service = GraphService::new(config, dims, config.run.seed).context("building the graph-service")?;
+        return Ok((service, Start { restored_from: None, restored_stored_steps: 0, refused }));
+    };
+    let m = &ckpt.manifest;
+    tracing::info!(
+        checkpoint = m.sequence,
+        stored_steps = m.stored_steps,
+        phi_version = m.phi_version,
+        secs = clock.elapsed().as_secs_f64(),
+        "graph-service restored from {}",
+        ckpt.path.display()
+    );
+    let start = Start { restored_from: Some(ckpt.path), restored_stored_steps: m.stored_steps, refused };
+    Ok((service, start))
+}
+
+/// When the graph-service writes checkpoints: every `run.checkpoint_interval_mins` and at a
+/// clean stop. A failed write is logged, counted in the status and retried at the next
+/// interval; serving goes on.
+struct Checkpoints {
+    dir: PathBuf,
+    interval: Duration,
+    last: Instant,
+    written: u64,
+    last_path: Option<PathBuf>,
+    errors: Vec<String>,
+}
+
+impl Checkpoints {
+    fn new(dir: PathBuf, interval_mins: f64) -> Self {
+        Self {
+            dir,
+            interval: Duration::from_secs_f64(interval_mins * 60.0),
+            last: Instant::now(),
+            written: 0,
+            last_path: None,
+            errors: Vec::new(),
+        }
+    }
+
+    /// Writes a checkpoint if the interval has passed since the last attempt.
+    fn tick(&mut self, service: &GraphService) {
+        if self.last.elapsed() >= self.interval {
+            self.write(service);
+        }
+    }
+
+    /// Writes a checkpoint now and logs its size and write time (or the error).
+    fn write(&mut self, service: &GraphService) {
+        let clock = Instant::now();
+        match service.save(&self.dir) {
+            Ok(ckpt) => {
+                let m = &ckpt.manifest;
+                tracing::info!(
+                    checkpoint = m.sequence,
+                    stored_steps = m.stored_steps,
+                    mib = m.total_bytes() as f64 / (1 << 20) as f64,
+                    secs = clock.elapsed().as_secs_f64(),
+                    "graph-service checkpoint written to {}",
+                    ckpt.path.display()
+                );
+                self.written += 1;
+                self.last_path = Some(ckpt.path);
+            }
+            Err(err) => {
+                tracing::error!("writing a graph-service checkpoint failed: {err:#}");
+                self.errors.push(err.to_string());
+            }
+        }
+        self.last = Instant::now();
+    }
 }
 
 fn ingest_all(service: &mut GraphService, trajectories: &TrajectorySubscriber) {
