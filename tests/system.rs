@@ -4,109 +4,20 @@
 //!
 //! The tests take a lock so that only one training run uses the two CI cores at a time.
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::Mutex;
-use std::time::{Duration, Instant};
+mod common;
 
+use std::path::Path;
+use std::sync::Mutex;
+
+use common::*;
 use serde_json::Value;
 
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
-/// Upper bound for one smoke run on a loaded 2-core machine; past it the run is killed.
-const WATCHDOG: Duration = Duration::from_secs(600);
 
-struct Run {
-    dir: PathBuf,
-    child: Child,
-}
-
-impl Run {
-    fn start(test: &str, extra: &[&str]) -> Run {
-        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
-        let dir = std::env::temp_dir().join(format!("asi-system-{test}-{}-{nanos}", std::process::id()));
-        let name = format!("t{}", nanos % 1_000_000_000);
-        let mut args = vec!["train", "--config", "configs/smoke.toml", "--actors", "2"];
-        let dir_arg = dir.to_string_lossy().into_owned();
-        let name_arg = format!("run.name={name}");
-        args.extend(["--run-dir", &dir_arg, "--set", &name_arg]);
-        args.extend(extra);
-        let child = Command::new(env!("CARGO_BIN_EXE_asi"))
-            .args(&args)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("asi starts");
-        Run { dir, child }
-    }
-
-    /// Waits for the launcher to exit; kills the whole run if the watchdog fires.
-    fn wait(&mut self) -> ExitStatus {
-        let deadline = Instant::now() + WATCHDOG;
-        loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                return status;
-            }
-            if Instant::now() > deadline {
-                self.kill_all();
-                panic!("watchdog: run in {} did not finish within {WATCHDOG:?}", self.dir.display());
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    }
-
-    /// Polls `check` on the run folder until it holds, or fails the test at the watchdog.
-    fn wait_until(&mut self, what: &str, check: impl Fn(&Path) -> bool) {
-        let deadline = Instant::now() + WATCHDOG;
-        while !check(&self.dir) {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                panic!("launcher exited ({status}) before: {what}");
-            }
-            if Instant::now() > deadline {
-                self.kill_all();
-                panic!("watchdog: never saw: {what}");
-            }
-            std::thread::sleep(Duration::from_millis(200));
-        }
-    }
-
-    fn signal(&self, pid: u32, signal: i32) {
-        // SAFETY: plain syscall on a pid of this run.
-        unsafe { libc::kill(pid as libc::pid_t, signal) };
-    }
-
-    fn kill_all(&mut self) {
-        for name in ["actor-0", "actor-1", "learner", "graph-service"] {
-            if let Some(pid) = pid_of(&self.dir, name) {
-                self.signal(pid, libc::SIGKILL);
-            }
-        }
-        let _ = self.child.kill();
-    }
-
-    fn status(&self, process: &str) -> Value {
-        let path = self.dir.join("status").join(format!("{process}.json"));
-        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        serde_json::from_str(&text).unwrap()
-    }
-
-    fn run_id(&self) -> String {
-        std::fs::read_to_string(self.dir.join("run_id")).unwrap().trim().to_owned()
-    }
-}
-
-impl Drop for Run {
-    fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
-            self.kill_all();
-        }
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
-}
-
-fn pid_of(dir: &Path, process: &str) -> Option<u32> {
-    std::fs::read_to_string(dir.join("status").join(format!("{process}.pid"))).ok()?.trim().parse().ok()
+/// `asi train` on the smoke config with two actors (see [`common::Run`]).
+fn start(test: &str, extra: &[&str]) -> Run {
+    let args = [&["--actors", "2"][..], extra].concat();
+    Run::start(&format!("system-{test}"), "configs/smoke.toml", &args)
 }
 
 fn learner_steps_in_metrics(dir: &Path) -> u64 {
@@ -117,49 +28,54 @@ fn learner_steps_in_metrics(dir: &Path) -> u64 {
         .fold(0.0, f64::max) as u64
 }
 
-/// iceoryx2 services and nodes whose names contain the run id (they must all be gone).
 /// Whether a metrics line shows actor 0's second incarnation with published steps (an actor
 /// publishes its metrics only after sending a chunk).
 fn restarted_actor0_published(dir: &Path) -> bool {
     let text = std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap_or_default();
-    text.lines().filter_map(|l| serde_json::from_str::<Value>(l).ok()).any(|v| {
-        v["actor0/actor/incarnation"].as_f64().is_some_and(|i| i >= 1.0)
-            && v["actor0/actor/env_steps"].as_f64().is_some_and(|s| s > 0.0)
-    })
-}
-
-fn leftovers_of(run_id: &str) -> Vec<String> {
-    use iceoryx2::prelude::*;
-    let mut found = Vec::new();
-    let config = iceoryx2::config::Config::global_config();
-    let _ = ipc::Service::list(config, |service| {
-        let name = service.static_details.name().to_string();
-        if name.contains(run_id) {
-            found.push(format!("service {name}"));
-        }
-        CallbackProgression::Continue
-    });
-    found
-}
-
-fn as_u64(v: &Value, key: &str) -> u64 {
-    v.get(key).and_then(Value::as_u64).unwrap_or_else(|| panic!("`{key}` missing in {v}"))
+    text.lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .any(|v| {
+            v["actor0/actor/incarnation"]
+                .as_f64()
+                .is_some_and(|i| i >= 1.0)
+                && v["actor0/actor/env_steps"]
+                    .as_f64()
+                    .is_some_and(|s| s > 0.0)
+        })
 }
 
 fn assert_nothing_lost(run: &Run, actor_statuses: &[Value]) {
     let learner = run.status("learner");
     let graph = run.status("graph-service");
-    let published: u64 = actor_statuses.iter().map(|s| as_u64(s, "published_steps")).sum();
+    let published: u64 = actor_statuses
+        .iter()
+        .map(|s| as_u64(s, "published_steps"))
+        .sum();
     assert!(published > 0, "actors published nothing");
-    assert_eq!(as_u64(&learner, "env_steps"), published, "learner ingested every published step");
-    assert_eq!(as_u64(&graph, "env_steps"), published, "graph-service stored every published step");
+    assert_eq!(
+        as_u64(&learner, "env_steps"),
+        published,
+        "learner ingested every published step"
+    );
+    assert_eq!(
+        as_u64(&graph, "env_steps"),
+        published,
+        "graph-service stored every published step"
+    );
     assert_eq!(as_u64(&learner, "lost_chunks"), 0);
     assert_eq!(as_u64(&learner, "duplicate_chunks"), 0);
     assert_eq!(as_u64(&learner, "rejected_chunks"), 0);
     for id in ["0", "1"] {
         let steps = learner["per_actor_steps"][id].as_u64().unwrap_or(0);
-        assert!(steps > 0, "actor {id}'s data reached the learner: {learner}");
-        assert_eq!(graph["per_actor_steps"][id].as_u64(), Some(steps), "graph agrees for actor {id}");
+        assert!(
+            steps > 0,
+            "actor {id}'s data reached the learner: {learner}"
+        );
+        assert_eq!(
+            graph["per_actor_steps"][id].as_u64(),
+            Some(steps),
+            "graph agrees for actor {id}"
+        );
     }
 }
 
@@ -167,96 +83,179 @@ fn assert_nothing_lost(run: &Run, actor_statuses: &[Value]) {
 fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     // Evaluations every 4 training episodes, 2 episodes each, so the evaluator runs too.
-    let mut run = Run::start("complete", &["--set", "eval.interval_episodes=4", "--set", "eval.n_episodes=2"]);
+    let mut run = start(
+        "complete",
+        &[
+            "--set",
+            "eval.interval_episodes=4",
+            "--set",
+            "eval.n_episodes=2",
+        ],
+    );
     let status = run.wait();
     assert!(status.success(), "launcher exit: {status}");
     let actors = [run.status("actor-0-0"), run.status("actor-1-0")];
     assert_nothing_lost(&run, &actors);
     for actor in &actors {
-        assert!(as_u64(actor, "policy_version") > 0, "actor acted with published weights: {actor}");
+        assert!(
+            as_u64(actor, "policy_version") > 0,
+            "actor acted with published weights: {actor}"
+        );
     }
     assert!(run.dir.join("config.resolved.toml").exists());
-    assert!(learner_steps_in_metrics(&run.dir) > 0, "metrics.jsonl has learner progress");
+    assert!(
+        learner_steps_in_metrics(&run.dir) > 0,
+        "metrics.jsonl has learner progress"
+    );
     // Coverage of the training data, a fraction of the maze's free cells.
-    let last: Value = serde_json::from_str(std::fs::read_to_string(run.dir.join("metrics.jsonl")).unwrap().lines().last().unwrap()).unwrap();
-    let coverage = last["learner/charts/coverage"].as_f64().expect("coverage metric");
+    let last: Value = serde_json::from_str(
+        std::fs::read_to_string(run.dir.join("metrics.jsonl"))
+            .unwrap()
+            .lines()
+            .last()
+            .unwrap(),
+    )
+    .unwrap();
+    let coverage = last["learner/charts/coverage"]
+        .as_f64()
+        .expect("coverage metric");
     assert!(coverage > 0.0 && coverage <= 1.0, "coverage {coverage}");
     // The evaluator evaluated published weights at least once and wrote its outputs.
     let evals = std::fs::read_to_string(run.dir.join("eval.jsonl")).unwrap_or_default();
-    let first: Value = serde_json::from_str(evals.lines().next().expect("an evaluation ran")).unwrap();
+    let first: Value =
+        serde_json::from_str(evals.lines().next().expect("an evaluation ran")).unwrap();
     let rate = first["success_rate"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&rate), "{first}");
-    assert!(first["train_episodes"].as_u64().unwrap() >= 4, "due only after 4 episodes: {first}");
+    assert!(
+        first["train_episodes"].as_u64().unwrap() >= 4,
+        "due only after 4 episodes: {first}"
+    );
     assert!(as_u64(&run.status("evaluator"), "evaluations") >= 1);
     for picture in ["plots/eval_latest.png", "plots/curves.png"] {
         let bytes = std::fs::read(run.dir.join(picture)).unwrap_or_default();
         assert!(bytes.starts_with(b"\x89PNG"), "{picture} is a PNG");
     }
-    let events: Vec<_> = std::fs::read_dir(run.dir.join("tensorboard")).unwrap().flatten().collect();
+    let events: Vec<_> = std::fs::read_dir(run.dir.join("tensorboard"))
+        .unwrap()
+        .flatten()
+        .collect();
     assert_eq!(events.len(), 1, "one TensorBoard event file");
-    assert!(events[0].metadata().unwrap().len() > 100, "event file has records");
-    assert_eq!(leftovers_of(&run.run_id()), Vec::<String>::new());
+    assert!(
+        events[0].metadata().unwrap().len() > 100,
+        "event file has records"
+    );
+    assert_eq!(services_of(&run.run_id()), Vec::<String>::new());
 }
 
 #[test]
 fn sigterm_stops_every_process_cleanly_and_leaves_no_shared_memory() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let mut run = Run::start("sigterm", &["--set", "run.max_episodes=1000000"]);
-    run.wait_until("the learner ingested data", |dir| learner_steps_in_metrics(dir) > 0);
-    run.signal(run.child.id(), libc::SIGTERM);
+    let mut run = start("sigterm", &["--set", "run.max_episodes=1000000"]);
+    run.wait_until("the learner ingested data", |dir| {
+        learner_steps_in_metrics(dir) > 0
+    });
+    signal(run.child.id(), libc::SIGTERM);
     let status = run.wait();
     assert!(status.success(), "launcher exit after SIGTERM: {status}");
     let actors = [run.status("actor-0-0"), run.status("actor-1-0")];
     assert_nothing_lost(&run, &actors);
     for process in ["learner", "graph-service"] {
-        assert_eq!(run.status(process)["stop_reason"], "stop requested", "{process} stopped by the launcher");
+        assert_eq!(
+            run.status(process)["stop_reason"],
+            "stop requested",
+            "{process} stopped by the launcher"
+        );
     }
-    assert_eq!(leftovers_of(&run.run_id()), Vec::<String>::new());
+    assert_eq!(services_of(&run.run_id()), Vec::<String>::new());
 }
 
 #[test]
 fn a_killed_actor_is_restarted_and_the_run_continues() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let mut run = Run::start("kill-actor", &["--set", "run.max_episodes=1000000"]);
-    run.wait_until("the learner ingested data", |dir| learner_steps_in_metrics(dir) > 0);
+    let mut run = start("kill-actor", &["--set", "run.max_episodes=1000000"]);
+    run.wait_until("the learner ingested data", |dir| {
+        learner_steps_in_metrics(dir) > 0
+    });
     let first_pid = pid_of(&run.dir, "actor-0").expect("actor-0 pid file");
-    run.signal(first_pid, libc::SIGKILL);
-    run.wait_until("actor-0 restarted", |dir| pid_of(dir, "actor-0").is_some_and(|pid| pid != first_pid));
+    signal(first_pid, libc::SIGKILL);
+    run.wait_until("actor-0 restarted", |dir| {
+        pid_of(dir, "actor-0").is_some_and(|pid| pid != first_pid)
+    });
     let steps_at_restart = learner_steps_in_metrics(&run.dir);
-    run.wait_until("the restarted actor published data", restarted_actor0_published);
-    run.wait_until("training continued after the restart", |dir| learner_steps_in_metrics(dir) > steps_at_restart + 500);
-    run.signal(run.child.id(), libc::SIGTERM);
+    run.wait_until(
+        "the restarted actor published data",
+        restarted_actor0_published,
+    );
+    run.wait_until("training continued after the restart", |dir| {
+        learner_steps_in_metrics(dir) > steps_at_restart + 500
+    });
+    signal(run.child.id(), libc::SIGTERM);
     let status = run.wait();
     assert!(status.success(), "launcher exit: {status}");
     let restarted = run.status("actor-0-1");
-    assert!(as_u64(&restarted, "published_steps") > 0, "the restarted actor produced data: {restarted}");
+    assert!(
+        as_u64(&restarted, "published_steps") > 0,
+        "the restarted actor produced data: {restarted}"
+    );
     let learner = run.status("learner");
-    assert_eq!(as_u64(&learner, "duplicate_chunks"), 0, "restarted actor reused no episode id: {learner}");
+    assert_eq!(
+        as_u64(&learner, "duplicate_chunks"),
+        0,
+        "restarted actor reused no episode id: {learner}"
+    );
     assert_eq!(as_u64(&learner, "rejected_chunks"), 0, "{learner}");
-    assert_eq!(leftovers_of(&run.run_id()), Vec::<String>::new());
+    assert_eq!(services_of(&run.run_id()), Vec::<String>::new());
 }
 
 #[test]
 fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let eval = ["--set", "eval.interval_episodes=2", "--set", "eval.n_episodes=1"];
-    let short = [&["--serial", "--set", "run.max_episodes=6", "--seed", "5"][..], &eval[..]].concat();
-    let mut first = Run::start("serial-a", &short);
+    let eval = [
+        "--set",
+        "eval.interval_episodes=2",
+        "--set",
+        "eval.n_episodes=1",
+    ];
+    let short = [
+        &["--serial", "--set", "run.max_episodes=6", "--seed", "5"][..],
+        &eval[..],
+    ]
+    .concat();
+    let mut first = start("serial-a", &short);
     assert!(first.wait().success());
-    let mut second = Run::start("serial-b", &short);
+    let mut second = start("serial-b", &short);
     assert!(second.wait().success());
     let a = std::fs::read_to_string(first.dir.join("metrics.jsonl")).unwrap();
     let b = std::fs::read_to_string(second.dir.join("metrics.jsonl")).unwrap();
-    assert!(a.lines().count() >= 3, "a line whenever episodes completed: {a}");
+    assert!(
+        a.lines().count() >= 3,
+        "a line whenever episodes completed: {a}"
+    );
     assert!(a.contains("losses/low_critic"), "training ran: {a}");
     assert_eq!(a, b, "same seed, same metrics");
-    assert!(a.contains("evaluator0/eval/success_rate"), "evaluations ran inline: {a}");
-    assert!(a.contains("learner/charts/coverage"), "coverage in serial mode: {a}");
+    assert!(
+        a.contains("evaluator0/eval/success_rate"),
+        "evaluations ran inline: {a}"
+    );
+    assert!(
+        a.contains("learner/charts/coverage"),
+        "coverage in serial mode: {a}"
+    );
     let evals = std::fs::read_to_string(first.dir.join("eval.jsonl")).unwrap();
-    assert!(evals.lines().count() >= 2, "evaluations at 2, 4, 6 episodes: {evals}");
-    assert_eq!(evals, std::fs::read_to_string(second.dir.join("eval.jsonl")).unwrap());
-    let other_args = [&["--serial", "--set", "run.max_episodes=6", "--seed", "6"][..], &eval[..]].concat();
-    let mut other = Run::start("serial-c", &other_args);
+    assert!(
+        evals.lines().count() >= 2,
+        "evaluations at 2, 4, 6 episodes: {evals}"
+    );
+    assert_eq!(
+        evals,
+        std::fs::read_to_string(second.dir.join("eval.jsonl")).unwrap()
+    );
+    let other_args = [
+        &["--serial", "--set", "run.max_episodes=6", "--seed", "6"][..],
+        &eval[..],
+    ]
+    .concat();
+    let mut other = start("serial-c", &other_args);
     assert!(other.wait().success());
     let c = std::fs::read_to_string(other.dir.join("metrics.jsonl")).unwrap();
     assert_ne!(a, c, "another seed gives another run");

@@ -60,6 +60,31 @@ impl Run {
         }
     }
 
+    /// Waits for the launcher and asserts that it exited successfully.
+    pub fn wait_success(&mut self) {
+        let status = self.wait();
+        assert!(
+            status.success(),
+            "launcher exit {status}:\n{}",
+            self.launcher_output()
+        );
+    }
+
+    /// Per metric key, the last value written to `metrics.jsonl`.
+    pub fn last_metrics(&self) -> std::collections::BTreeMap<String, f64> {
+        let text = std::fs::read_to_string(self.dir.join("metrics.jsonl")).unwrap();
+        let mut last = std::collections::BTreeMap::new();
+        for line in text.lines() {
+            let record: Value = serde_json::from_str(line).unwrap();
+            for (key, value) in record.as_object().unwrap() {
+                if let Some(v) = value.as_f64() {
+                    last.insert(key.clone(), v);
+                }
+            }
+        }
+        last
+    }
+
     /// Seconds since the launcher started.
     pub fn elapsed_secs(&self) -> f64 {
         self.started.elapsed().as_secs_f64()
@@ -94,6 +119,12 @@ impl Run {
         }
     }
 
+    /// Polls `check` on the run folder until it holds (as [`Run::wait_for`]).
+    pub fn wait_until(&mut self, what: &str, check: impl Fn(&Path) -> bool) {
+        self.wait_for(what, |dir| check(dir).then_some(()));
+    }
+
+    /// Kills the whole run and fails the test once the watchdog has expired.
     pub fn check_watchdog(&mut self, what: &str) {
         if self.started.elapsed() > WATCHDOG {
             self.kill_all();
