@@ -8,8 +8,10 @@
 //! θ ← θ − lr · (m / (1 − β₁ᵗ)) / (√(v / (1 − β₂ᵗ)) + ε)
 //! ```
 //!
-//! ε is added outside the square root, after bias correction, as in PyTorch. Defaults
-//! ([`AdamParams::default`]) are PyTorch's: lr 1e-3, β = (0.9, 0.999), ε = 1e-8.
+//! ε is added outside the square root, after bias correction, as in PyTorch. With a weight
+//! decay λ > 0 the gradient is first replaced by `g + λ·θ` (PyTorch's `Adam(weight_decay=λ)`,
+//! L2 through the moments, not AdamW's decoupled decay). Defaults ([`AdamParams::default`]) are
+//! PyTorch's: lr 1e-3, β = (0.9, 0.999), ε = 1e-8, λ = 0.
 //!
 //! Why not candle's `AdamW`: its moments are private, so a checkpoint could not carry them,
 //! and a resumed run would restart Adam from zero moments (a different trajectory). Speed: the
@@ -34,6 +36,8 @@ pub struct AdamParams {
     pub beta2: f64,
     /// ε, added to the bias-corrected √v. Default 1e-8 (PyTorch).
     pub eps: f64,
+    /// L2 weight decay λ added to the gradient (`g + λ·θ`). Default 0 (PyTorch).
+    pub weight_decay: f64,
 }
 
 impl Default for AdamParams {
@@ -43,6 +47,7 @@ impl Default for AdamParams {
             beta1: 0.9,
             beta2: 0.999,
             eps: 1e-8,
+            weight_decay: 0.0,
         }
     }
 }
@@ -208,6 +213,7 @@ impl Optimizer for Adam {
             step_size: (p.lr / (1.0 - p.beta1.powi(t))) as f32,
             inv_sqrt_bc2: (1.0 / (1.0 - p.beta2.powi(t)).sqrt()) as f32,
             eps: p.eps as f32,
+            weight_decay: p.weight_decay as f32,
         };
         for slot in &mut self.slots {
             if let Some(grad) = grads.get(slot.var.as_tensor()) {
@@ -237,6 +243,8 @@ struct Coeffs {
     /// 1 / √(1 − β₂ᵗ).
     inv_sqrt_bc2: f32,
     eps: f32,
+    /// λ (0 = none).
+    weight_decay: f32,
 }
 
 impl Slot {
@@ -246,6 +254,7 @@ impl Slot {
         let theta = self.var.as_tensor();
         let mut next = theta.flatten_all()?.to_vec1::<f32>()?;
         for (((x, m), v), g) in next.iter_mut().zip(&mut self.m).zip(&mut self.v).zip(&grad) {
+            let g = g + c.weight_decay * *x;
             *m = c.beta1 * *m + c.one_minus_beta1 * g;
             *v = c.beta2 * *v + c.one_minus_beta2 * g * g;
             *x -= c.step_size * *m / (v.sqrt() * c.inv_sqrt_bc2 + c.eps);

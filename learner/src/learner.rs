@@ -39,7 +39,6 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
 use nets::{spec_from_config, NetsSpec, TaskDims};
-use protocol::config::LowAlgo;
 use protocol::{
     Config, PhiVersion, PolicyVersion, RunSchedule, StepLayout, StepView, TrajectoryHeader,
     WeightsHeader,
@@ -48,6 +47,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
+use crate::deterministic::DeterministicStats;
 use crate::error::LearnerError;
 use crate::ingest::{Buffers, Episodes};
 use crate::phi::{PhiParams, PhiStats, PhiStore, PhiTrainer};
@@ -55,7 +55,7 @@ use crate::ratio::ReplayRatio;
 use crate::replay::{sample_into, BatchStage, HighReplay, LowReplay, LowRewardSpec};
 use crate::sac::{SacBatch, SacLevel, SacStats};
 use crate::schedule::ScheduleTracker;
-use crate::setup::{build_networks, deterministic_unsupported, Networks};
+use crate::setup::{build_networks, LowLevel, Networks};
 
 pub mod checkpoint;
 use crate::si::{RouteSource, SelfImitation, SiParams, SiStats};
@@ -125,6 +125,7 @@ struct PublishState {
 #[derive(Debug, Clone, Copy, Default)]
 struct Telemetry {
     low: SacStats,
+    low_deterministic: DeterministicStats,
     high: SacStats,
     train_secs: f64,
     updates_timed: u64,
@@ -188,9 +189,6 @@ impl Learner {
         seed: u64,
     ) -> Result<Learner, LearnerError> {
         config.validate()?;
-        if config.learner.low.algo == LowAlgo::Deterministic {
-            return Err(deterministic_unsupported());
-        }
         let spec = spec_from_config(config, dims)?;
         let layout = StepLayout::new(
             spec.obs_dim,
@@ -393,7 +391,7 @@ impl Learner {
         Ok(done)
     }
 
-    /// One low-level SAC update on a uniform batch.
+    /// One low-level update (SAC, or the deterministic level's) on a uniform batch.
     fn low_update(&mut self) -> Result<(), LearnerError> {
         let len = self.low_replay.ring().len();
         let replay = &self.low_replay;
@@ -401,8 +399,17 @@ impl Learner {
             replay.fill(stage, k, i)
         });
         let batch = to_tensors(&self.low_stage)?;
-        let (next_eps, eps) = self.noise_pair(self.low_stage.batch, self.spec.action_dim)?;
-        self.telemetry.low = self.nets.low.update(&batch, &next_eps, &eps)?;
+        match &mut self.nets.low {
+            LowLevel::Sac(level) => {
+                let (batch_size, dim) = (self.low_stage.batch, self.spec.action_dim);
+                let (next_eps, eps) = noise_pair(&mut self.rng, &mut self.noise, batch_size, dim)?;
+                self.telemetry.low = level.update(&batch, &next_eps, &eps)?;
+            }
+            LowLevel::Deterministic(level) => {
+                level.set_lr_for_episodes(self.schedule.train_episodes());
+                self.telemetry.low_deterministic = level.update(&batch, self.updates_low)?;
+            }
+        }
         self.updates_low += 1;
         Ok(())
     }
@@ -415,7 +422,8 @@ impl Learner {
             replay.fill(stage, k, i)
         });
         let batch = to_tensors(&self.high_stage)?;
-        let (next_eps, eps) = self.noise_pair(self.high_stage.batch, self.spec.latent_dim)?;
+        let (batch_size, dim) = (self.high_stage.batch, self.spec.latent_dim);
+        let (next_eps, eps) = noise_pair(&mut self.rng, &mut self.noise, batch_size, dim)?;
         self.telemetry.high = self.nets.high.update(&batch, &next_eps, &eps)?;
         self.updates_high += 1;
         Ok(())
@@ -445,17 +453,6 @@ impl Learner {
     /// The self-imitation state (buffer, counters).
     pub fn self_imitation(&self) -> &SelfImitation {
         &self.si
-    }
-
-    /// Two `[batch, dim]` standard-normal tensors from the learner's generator.
-    fn noise_pair(&mut self, batch: usize, dim: usize) -> Result<(Tensor, Tensor), LearnerError> {
-        let mut draw = || -> Result<Tensor, LearnerError> {
-            self.noise.clear();
-            self.noise
-                .extend((0..batch * dim).map(|_| -> f32 { StandardNormal.sample(&mut self.rng) }));
-            Ok(Tensor::from_slice(&self.noise, (batch, dim), &Device::Cpu)?)
-        };
-        Ok((draw()?, draw()?))
     }
 
     /// Actor-side weights (encoder, high policy, low policy) as safetensors bytes with their
@@ -590,15 +587,20 @@ impl Learner {
         &self.nets.high
     }
 
-    /// Low-level SAC state (networks, α).
-    pub fn low_level(&self) -> &SacLevel {
+    /// Low-level state (SAC or deterministic).
+    pub fn low_level(&self) -> &LowLevel {
         &self.nets.low
     }
 
     /// Scalar metrics, names as in `docs/METRICS.md` (prefixes `losses/`, `charts/`,
     /// `replay/`, `ingest/`, `phi/`, `schedule/`, `si/`).
     pub fn metrics(&self) -> Vec<(&'static str, f64)> {
-        let mut out = sac_metrics(&self.telemetry.low, LOW_NAMES);
+        let mut out = match &self.nets.low {
+            LowLevel::Sac(_) => sac_metrics(&self.telemetry.low, LOW_NAMES),
+            LowLevel::Deterministic(level) => {
+                deterministic_metrics(&self.telemetry.low_deterministic, level.learning_rate())
+            }
+        };
         out.extend(sac_metrics(&self.telemetry.high, HIGH_NAMES));
         out.extend(self.count_metrics());
         out.extend(self.phi_metrics());
@@ -748,6 +750,41 @@ fn sac_metrics(s: &SacStats, names: SacNames) -> Vec<(&'static str, f64)> {
         (names.entropy, s.actor.entropy),
         (names.q, 0.5 * (s.critic.q1_mean + s.critic.q2_mean)),
     ]
+}
+
+/// The last deterministic low update's statistics (`docs/METRICS.md`); the loss and Q names
+/// are SAC's, so one chart serves either algorithm.
+fn deterministic_metrics(s: &DeterministicStats, lr: f64) -> Vec<(&'static str, f64)> {
+    let kept = if s.n_sampled > 0 {
+        s.n_kept as f64 / s.n_sampled as f64
+    } else {
+        0.0
+    };
+    vec![
+        (LOW_NAMES.critic, s.critic.loss),
+        (LOW_NAMES.actor, s.actor_loss),
+        (LOW_NAMES.q, s.critic.q_mean),
+        ("charts/low_target_q", s.critic.target_mean),
+        ("charts/low_actor_grad_norm", s.actor_grad_norm),
+        ("charts/low_critic_grad_norm", s.critic_grad_norm),
+        ("charts/low_kept_fraction", kept),
+        ("charts/low_lr", lr),
+    ]
+}
+
+/// Two `[batch, dim]` standard-normal tensors from `rng` (`scratch` is reused).
+fn noise_pair(
+    rng: &mut Pcg64Mcg,
+    scratch: &mut Vec<f32>,
+    batch: usize,
+    dim: usize,
+) -> Result<(Tensor, Tensor), LearnerError> {
+    let mut draw = || -> Result<Tensor, LearnerError> {
+        scratch.clear();
+        scratch.extend((0..batch * dim).map(|_| -> f32 { StandardNormal.sample(&mut *rng) }));
+        Ok(Tensor::from_slice(scratch, (batch, dim), &Device::Cpu)?)
+    };
+    Ok((draw()?, draw()?))
 }
 
 /// Empty buffers sized from `[replay]`: low `capacity_steps`, high `capacity_steps / c`.

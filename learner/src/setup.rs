@@ -1,21 +1,24 @@
 //! Building the learner's networks from the run config: the actor-side [`PolicySet`] (the
-//! parameters that are published), the online critics and their targets, and one
-//! [`SacLevel`] per level.
+//! parameters that are published), the online critics and their targets, a [`SacLevel`] for
+//! the high level and a [`LowLevel`] (SAC, or the reference code's deterministic level).
 //!
 //! Three `VarMap`s with disjoint roles: `policy` (encoder, high policy, low policy — names and
-//! layout hash identical to every actor's), `critic` (high and low twin critics), `target`
-//! (the same critic names, Polyak-averaged copies). Initial values come from
-//! [`nets::seeded_var_builder`], so a run is reproducible from its seed.
+//! layout hash identical to every actor's), `critic` (high and low critics), `target` (the same
+//! critic names, Polyak-averaged copies; with the deterministic low level also the target
+//! actor under the `low_policy` names). Initial values come from [`nets::seeded_var_builder`],
+//! so a run is reproducible from its seed.
 
-use candle_core::Device;
+use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
 use nets::weights::vars_under;
 use nets::{
-    prefix, seeded_var_builder, GaussianPolicy, LowCritic, LowPolicy, NetsSpec, PolicySet,
-    TwinCritic,
+    prefix, seeded_var_builder, DeterministicActor, DistanceCritic, GaussianPolicy, LowCritic,
+    LowPolicy, NetsSpec, PolicySet, TwinCritic,
 };
 use protocol::Config;
 
+use crate::adam::Adam;
+use crate::deterministic::{DeterministicLevel, DeterministicNets, DeterministicParams};
 use crate::error::LearnerError;
 use crate::sac::{SacLevel, SacNets, SacParams};
 
@@ -37,8 +40,50 @@ pub struct Networks {
     pub policies: PolicySet,
     /// High-level SAC.
     pub high: SacLevel,
-    /// Low-level SAC.
-    pub low: SacLevel,
+    /// The low level (`learner.low.algo`).
+    pub low: LowLevel,
+}
+
+/// The low level of either algorithm.
+#[derive(Debug)]
+pub enum LowLevel {
+    /// SAC, as the high level.
+    Sac(SacLevel),
+    /// The reference code's deterministic actor-critic.
+    Deterministic(DeterministicLevel),
+}
+
+impl LowLevel {
+    /// One Adam step of the policy's optimiser on an extra policy loss (self-imitation).
+    pub fn policy_step(
+        &mut self,
+        loss: &Tensor,
+        what: &'static str,
+        value: f64,
+    ) -> Result<(), LearnerError> {
+        match self {
+            Self::Sac(level) => level.policy_step(loss, what, value),
+            Self::Deterministic(level) => level.policy_step(loss, what, value),
+        }
+    }
+
+    /// The optimisers by name and log α when tuned (checkpoints).
+    pub(crate) fn optimizers(&self) -> (Vec<(&'static str, &Adam)>, Option<&candle_core::Var>) {
+        match self {
+            Self::Sac(level) => level.optimizers(),
+            Self::Deterministic(level) => (level.optimizers(), None),
+        }
+    }
+
+    /// As [`LowLevel::optimizers`], mutable (checkpoints).
+    pub(crate) fn optimizers_mut(
+        &mut self,
+    ) -> (Vec<(&'static str, &mut Adam)>, Option<&candle_core::Var>) {
+        match self {
+            Self::Sac(level) => level.optimizers_mut(),
+            Self::Deterministic(level) => (level.optimizers_mut(), None),
+        }
+    }
 }
 
 /// Builds every network of `spec` and both SAC levels.
@@ -54,11 +99,8 @@ pub fn build_networks(
     let (high_critic, low_critic) =
         critics(spec, &critic_vm, seed.wrapping_add(CRITIC_SEED_OFFSET))?;
     let target_vm = VarMap::new();
-    let (high_target, low_target) =
-        critics(spec, &target_vm, seed.wrapping_add(TARGET_SEED_OFFSET))?;
-    let LowPolicy::Gaussian(low_policy) = policies.low.clone() else {
-        return Err(deterministic_unsupported());
-    };
+    let target_seed = seed.wrapping_add(TARGET_SEED_OFFSET);
+    let (high_target, low_target) = critics(spec, &target_vm, target_seed)?;
     let maps = Maps {
         policy: &policy_vm,
         critic: &critic_vm,
@@ -71,15 +113,33 @@ pub fn build_networks(
         high_target,
         prefix::HIGH_CRITIC,
     );
-    let low_nets = maps.level(
-        low_policy,
-        prefix::LOW_POLICY,
-        low_critic,
-        low_target,
-        prefix::LOW_CRITIC,
-    );
     let high = SacLevel::new("high", high_nets, high_params(config, spec))?;
-    let low = SacLevel::new("low", low_nets, low_params(config, spec))?;
+    let low = match (policies.low.clone(), low_critic, low_target) {
+        (LowPolicy::Gaussian(policy), LowCritic::Twin(critic), LowCritic::Twin(target)) => {
+            let nets = maps.level(
+                policy,
+                prefix::LOW_POLICY,
+                critic,
+                target,
+                prefix::LOW_CRITIC,
+            );
+            LowLevel::Sac(SacLevel::new("low", nets, low_params(config, spec))?)
+        }
+        (
+            LowPolicy::Deterministic(actor),
+            LowCritic::Distance(critic),
+            LowCritic::Distance(critic_target),
+        ) => {
+            let actor_target = target_actor(spec, &target_vm, target_seed)?;
+            let nets = maps.deterministic(actor, actor_target, critic, critic_target);
+            LowLevel::Deterministic(DeterministicLevel::new(nets, deterministic_params(config))?)
+        }
+        _ => {
+            return Err(LearnerError::Nets(nets::NetsError::Spec(
+                "low level: policy and critics of different variants".to_owned(),
+            )))
+        }
+    };
     Ok(Networks {
         policy_vm,
         critic_vm,
@@ -90,28 +150,32 @@ pub fn build_networks(
     })
 }
 
-/// The error for `learner.low.algo = "deterministic"`.
-pub fn deterministic_unsupported() -> LearnerError {
-    LearnerError::Unsupported {
-        key: "learner.low.algo",
-        reason:
-            "the deterministic low-level variant is not trained by this learner yet; use \"sac\""
-                .to_owned(),
-    }
+/// The target actor of the deterministic low level, under `low_policy` on the target map.
+fn target_actor(
+    spec: &NetsSpec,
+    vm: &VarMap,
+    seed: u64,
+) -> Result<DeterministicActor, LearnerError> {
+    let vb = seeded_var_builder(vm, seed, &Device::Cpu);
+    Ok(DeterministicActor::new(
+        &vb.pp(prefix::LOW_POLICY),
+        spec.low_policy_in(),
+        &spec.low_hidden,
+        spec.action_dim,
+        spec.low_action_scale,
+        spec.low_init(),
+    )?)
 }
 
-/// High and low twin critics on `vm`.
+/// The high twin critic and the low critic of the configured variant on `vm`.
 fn critics(
     spec: &NetsSpec,
     vm: &VarMap,
     seed: u64,
-) -> Result<(TwinCritic, TwinCritic), LearnerError> {
+) -> Result<(TwinCritic, LowCritic), LearnerError> {
     let vb = seeded_var_builder(vm, seed, &Device::Cpu);
     let high = spec.high_critic(&vb.pp(prefix::HIGH_CRITIC))?;
-    match spec.low_critic(&vb.pp(prefix::LOW_CRITIC))? {
-        LowCritic::Twin(low) => Ok((high, low)),
-        LowCritic::Distance(_) => Err(deterministic_unsupported()),
-    }
+    Ok((high, spec.low_critic(&vb.pp(prefix::LOW_CRITIC))?))
 }
 
 /// The three maps, to collect one level's parameters.
@@ -139,6 +203,27 @@ impl Maps<'_> {
             target_vars: vars_under(self.target, critic_prefix),
         }
     }
+
+    /// The deterministic low level's networks: the actor on `policy`, its target under the same
+    /// names on `target`, the critic on `critic` and its target on `target`.
+    fn deterministic(
+        &self,
+        actor: DeterministicActor,
+        actor_target: DeterministicActor,
+        critic: DistanceCritic,
+        critic_target: DistanceCritic,
+    ) -> DeterministicNets {
+        DeterministicNets {
+            actor,
+            actor_vars: vars_under(self.policy, prefix::LOW_POLICY),
+            actor_target,
+            actor_target_vars: vars_under(self.target, prefix::LOW_POLICY),
+            critic,
+            critic_vars: vars_under(self.critic, prefix::LOW_CRITIC),
+            critic_target,
+            critic_target_vars: vars_under(self.target, prefix::LOW_CRITIC),
+        }
+    }
 }
 
 /// `[learner.high]` as SAC parameters; H̄ = −dim(delta).
@@ -164,5 +249,22 @@ fn low_params(config: &Config, spec: &NetsSpec) -> SacParams {
         alpha: c.alpha,
         auto_alpha: c.auto_alpha,
         target_entropy: -(spec.action_dim as f64),
+    }
+}
+
+/// `[learner.low]` and `[learner.low.deterministic]` as the deterministic level's parameters.
+fn deterministic_params(config: &Config) -> DeterministicParams {
+    let c = &config.learner.low;
+    let d = &c.deterministic;
+    DeterministicParams {
+        gamma: c.gamma,
+        lr: d.lr,
+        lr_decay_episodes: d.lr_decay_episodes,
+        lr_decay_factor: d.lr_decay_factor,
+        critic_weight_decay: d.critic_weight_decay,
+        polyak: d.polyak,
+        target_update_period: u64::from(d.target_update_period),
+        grad_clip: d.grad_clip,
+        reach_threshold: config.hierarchy.low_reach_threshold,
     }
 }

@@ -10,7 +10,7 @@ use candle_nn::{VarBuilder, VarMap};
 use learner::si::step::low_action;
 use learner::si::{high_si_loss, low_si_loss};
 use learner::LearnerError;
-use nets::{GaussianPolicy, LinearInit};
+use nets::{GaussianPolicy, LinearInit, LowPolicy};
 
 fn close(what: &str, got: &[f64], want: &[f64]) {
     assert_eq!(got.len(), want.len(), "{what}: length");
@@ -193,7 +193,7 @@ fn the_low_loss_moves_the_policy_only_through_the_aligned_branch() {
     let (policy, vm) = policy();
     let base = mat(&[0.4, -0.8], 2, 1);
     let r_idx = mat(&[1.0, 2.0, -1.0, 0.5], 2, 2);
-    let aligned = low_action(&policy, &base, &r_idx).unwrap();
+    let aligned = low_action(&LowPolicy::Gaussian(policy.clone()), &base, &r_idx).unwrap();
     close(
         "aligned action",
         &flat(&aligned),

@@ -2,10 +2,10 @@
 //! SPEC §5, digest §3.2): a deterministic actor and a γ-distance critic trained DDPG-style.
 //!
 //! - [`losses`]: the target, critic and actor losses as pure functions.
-//!
-//! Not yet wired into [`crate::Learner`] (which still refuses the setting, see
-//! [`crate::setup::deterministic_unsupported`]): the update step, target networks with the
-//! code's Polyak 0.99 every third batch, gradient clipping and the `not_done` labels in the
-//! low replay remain to be built on these losses.
+//! - [`update`]: one update in the code's order (actor before critic, both gradient-clipped),
+//!   with target actor and critic moved by Polyak 0.99 every third update.
 
 pub mod losses;
+pub mod update;
+
+pub use update::{DeterministicLevel, DeterministicNets, DeterministicParams, DeterministicStats};

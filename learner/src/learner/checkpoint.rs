@@ -7,7 +7,7 @@
 //! | file | contents |
 //! |---|---|
 //! | `policy.safetensors` | published parameters (encoder, high and low policies) |
-//! | `critic.safetensors`, `target.safetensors` | online and target critics |
+//! | `critic.safetensors`, `target.safetensors` | online and target critics (and the deterministic low level's target actor) |
 //! | `optim.safetensors` | Adam m and v of every optimiser, log α; step counts in metadata |
 //! | `replay_low.safetensors`, `replay_high.safetensors` | buffer columns, rows `0..len`; ring in metadata |
 //! | `phi_store.safetensors` | φ store runs (observations, priorities); run lengths and stats in metadata |
@@ -475,8 +475,11 @@ fn save_optim(l: &Learner) -> Result<Vec<u8>, String> {
     let mut arrays = Vec::new();
     let mut metadata = HashMap::new();
     let mut opts = vec![("phi".to_owned(), l.phi.checkpoint_parts().0)];
-    for (level, sac) in [("low", &l.nets.low), ("high", &l.nets.high)] {
-        let (level_opts, log_alpha) = sac.optimizers();
+    let levels = [
+        ("low", l.nets.low.optimizers()),
+        ("high", l.nets.high.optimizers()),
+    ];
+    for (level, (level_opts, log_alpha)) in levels {
         opts.extend(
             level_opts
                 .into_iter()
@@ -529,8 +532,11 @@ fn adam_state(
 
 fn restore_optim(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
     let (st, metadata) = parse_safetensors(bytes)?;
-    for (level, sac) in [("low", &mut l.nets.low), ("high", &mut l.nets.high)] {
-        let (opts, log_alpha) = sac.optimizers_mut();
+    let levels = [
+        ("low", l.nets.low.optimizers_mut()),
+        ("high", l.nets.high.optimizers_mut()),
+    ];
+    for (level, (opts, log_alpha)) in levels {
         if let Some(var) = log_alpha {
             let key = format!("{level}.log_alpha");
             let values = f32_array(&st, &key, var.elem_count())?;

@@ -12,10 +12,11 @@
 //! source, a graph with another φ version, no usable route left, or an empty buffer.
 //!
 //! Low-level policy: the SAC low level's action at `[s_t, φ(s_t), subgoal]` is its deterministic
-//! action `scale · tanh(μ)` — the counterpart of the reference code's deterministic actor.
+//! action `scale · tanh(μ)` — the counterpart of the reference code's deterministic actor, which
+//! the deterministic low level uses as it is (steps on the actor's Adam, unclipped, as the code).
 
 use candle_core::{Device, Tensor};
-use nets::GaussianPolicy;
+use nets::LowPolicy;
 use protocol::graph::{LatentPoint, RouteQuery};
 use protocol::{Config, PhiVersion};
 use rand::Rng;
@@ -471,7 +472,7 @@ impl SelfImitation {
         let phi = Tensor::from_slice(&usable.phi, (m, 2), &cpu)?;
         let base = Tensor::cat(&[&obs, &phi], 1)?;
         let target = Tensor::from_slice(&usable.target, (m, 2), &cpu)?;
-        let policy = nets.low.policy();
+        let policy = &nets.policies.low;
         let aligned = low_action(policy, &base, &target)?;
         let refs = Tensor::from_slice(&usable.refs, (m * u, 2), &cpu)?;
         // Row r's references are rows r·U … r·U + U − 1: repeat each base row U times.
@@ -493,7 +494,7 @@ impl SelfImitation {
 
 /// π_lo's deterministic action at `[base, subgoal]` (`base = [s_t, φ(s_t)]`).
 pub fn low_action(
-    policy: &GaussianPolicy,
+    policy: &LowPolicy,
     base: &Tensor,
     subgoal: &Tensor,
 ) -> Result<Tensor, LearnerError> {
