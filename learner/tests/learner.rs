@@ -4,7 +4,8 @@
 mod common;
 
 use common::*;
-use learner::{Learner, LearnerError};
+use learner::setup::LowLevel;
+use learner::Learner;
 use protocol::config::LowAlgo;
 
 #[test]
@@ -60,20 +61,36 @@ fn the_same_seed_gives_the_same_training() {
 }
 
 #[test]
-fn the_deterministic_low_variant_is_refused_with_a_clear_error() {
+fn the_deterministic_low_variant_trains_and_publishes_the_weights_actors_load() {
     let mut config = config();
     config.learner.low.algo = LowAlgo::Deterministic;
-    let err = Learner::new(&config, DIMS, 0).err().expect("refused");
+    config.learner.low.deterministic.actor_hidden = vec![16, 16];
+    config.learner.low.deterministic.critic_hidden = vec![16, 16];
+    let mut l = Learner::new(&config, DIMS, 7).unwrap();
+    assert!(matches!(l.low_level(), LowLevel::Deterministic(_)));
+    for ep in 0..4 {
+        ingest_episode(&mut l, ep as u32 % 2, ep, 10, 2, 4);
+    }
+    l.train(usize::MAX).unwrap();
+    assert_eq!(l.progress().updates_low, 16, "40 steps × 0.4");
+    let metrics = l.metrics();
+    assert!(metrics.iter().all(|(_, v)| v.is_finite()), "{metrics:?}");
+    let get = |name| metrics.iter().find(|(n, _)| *n == name).unwrap().1;
+    assert!(get("losses/low_critic") > 0.0, "the critic is fitted");
+    assert!(get("charts/low_kept_fraction") > 0.0);
+    assert_eq!(get("charts/low_lr"), 2e-4);
     assert!(
-        matches!(
-            err,
-            LearnerError::Unsupported {
-                key: "learner.low.algo",
-                ..
-            }
-        ),
-        "{err}"
+        metrics.iter().all(|(n, _)| *n != "charts/low_alpha"),
+        "no SAC α"
     );
+    // What an actor builds from the same config and task has the published layout.
+    let spec = nets::spec_from_config(&config, DIMS).unwrap();
+    let vm = candle_nn::VarMap::new();
+    let vb = nets::seeded_var_builder(&vm, 1, &candle_core::Device::Cpu);
+    nets::PolicySet::new(&spec, &vb).unwrap();
+    let (header, bytes) = l.publish_due().unwrap().expect("first weights");
+    assert_eq!(header.layout_hash, nets::layout_hash(&vm));
+    nets::load_safetensors_bytes(&vm, &bytes).unwrap();
 }
 
 #[test]
