@@ -75,7 +75,7 @@ struct Kill {
 struct LearnerRestart {
     /// Env steps of the newest checkpoint on disk just before the kill.
     newest_checkpoint_steps: u64,
-    /// Versions the killed learner had published (`status/learner.published.json`).
+    /// Versions the killed learner had published (`learner_published.json`).
     published_policy: u64,
     published_phi: u64,
     /// The restarted learner's start record.
@@ -159,7 +159,7 @@ fn kill_and_wait(
     let old_pid = pid_of(&run.dir, &process).expect("pid file");
     let n_starts = learner_starts(&run.dir).len();
     let learner_before = (target == Target::Learner).then(|| {
-        let published = read_json(&run.dir.join("status").join("learner.published.json"));
+        let published = read_json(&run.dir.join("learner_published.json"));
         (
             newest_checkpoint_steps(&run.dir).unwrap_or(0),
             as_u64(&published, "policy_version"),

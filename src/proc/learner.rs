@@ -5,9 +5,11 @@
 //!
 //! Crash recovery: a learner restarted by the launcher starts from the newest checkpoint
 //! ([`crate::run::open_learner`]). Before each weights message it records the versions in
-//! `status/learner.published.json` ([`PUBLISHED_FILE`]); a restarted learner continues its
-//! versions above those ([`learner::Learner::continue_versions_after`]), so the versions every
-//! other process sees only go up although the checkpoint is older. Each start appends a line to
+//! `run_dir/learner_published.json` ([`PUBLISHED_FILE`], kept across launches of the run); a
+//! restarted or resumed learner continues its versions above those
+//! ([`learner::Learner::continue_versions_after`]), so the versions every other process sees
+//! only go up although the checkpoint is older — also for a graph-service that restored a φ
+//! newer than the learner's checkpoint after a crash of the whole run. Each start appends a line to
 //! `status/learner.starts.jsonl` ([`STARTS_FILE`]: pid, env steps restored, versions), written
 //! once its trajectory subscriber exists.
 
@@ -33,8 +35,9 @@ const IDLE_WAIT: Duration = Duration::from_millis(50);
 const UPDATES_PER_TICK: usize = 8;
 /// How often publishers hand their history (latest weights, progress) to new subscribers.
 const RECONNECT_INTERVAL: Duration = Duration::from_millis(500);
-/// Status file: the versions of the newest weights message this launch's learners published.
-pub const PUBLISHED_FILE: &str = "learner.published.json";
+/// File in the run folder: the versions of the newest weights message the run's learners
+/// published (all launches; `--restart` moves it aside with the folder).
+pub const PUBLISHED_FILE: &str = "learner_published.json";
 /// Status file: one JSON line per learner start of this launch.
 pub const STARTS_FILE: &str = "learner.starts.jsonl";
 
@@ -165,7 +168,7 @@ fn publish_weights(
     };
     // Recorded before the send: a learner killed in between only skips one version number.
     let versions = serde_json::json!({ "policy_version": header.policy_version.0, "phi_version": header.phi_version.0 });
-    crate::run::write_atomically(&status_file(ctx, PUBLISHED_FILE), &versions.to_string())?;
+    crate::run::write_atomically(&ctx.run_dir.join(PUBLISHED_FILE), &versions.to_string())?;
     if weights.is_none() {
         *weights = Some(channels.weights_publisher(node, bytes.len())?);
     }
@@ -175,30 +178,35 @@ fn publish_weights(
     Ok(())
 }
 
+/// `(policy_version, phi_version)` of a [`PUBLISHED_FILE`].
+fn published_versions(text: &str) -> Option<(PolicyVersion, PhiVersion)> {
+    let value: serde_json::Value = serde_json::from_str(text).ok()?;
+    let policy = value.get("policy_version")?.as_u64()?;
+    let phi = value.get("phi_version")?.as_u64()?;
+    Some((PolicyVersion(policy), PhiVersion(phi)))
+}
+
 fn status_file(ctx: &RunContext, name: &str) -> std::path::PathBuf {
     ctx.run_dir.join(crate::run::STATUS_DIR).join(name)
 }
 
-/// A learner restarted within this launch continues its versions above what its predecessor
-/// published (see the module doc); a first start finds no file and changes nothing.
+/// A restarted or resumed learner continues its versions above what its predecessors
+/// published (see the module doc); a first start finds no file and changes nothing. An
+/// unreadable file is reported and ignored (versions then continue from the checkpoint).
 fn continue_published_versions(ctx: &RunContext, learner: &mut Learner) -> anyhow::Result<()> {
-    let path = status_file(ctx, PUBLISHED_FILE);
+    let path = ctx.run_dir.join(PUBLISHED_FILE);
     let text = match std::fs::read_to_string(&path) {
         Ok(text) => text,
         Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(()),
         Err(err) => return Err(err).with_context(|| format!("reading {}", path.display())),
     };
-    let value: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
-    let version = |key: &str| {
-        value[key]
-            .as_u64()
-            .with_context(|| format!("`{key}` missing in {}", path.display()))
+    let Some((policy, phi)) = published_versions(&text) else {
+        tracing::error!(
+            "{} is unreadable ({text:?}); weights versions continue from the checkpoint",
+            path.display()
+        );
+        return Ok(());
     };
-    let (policy, phi) = (
-        PolicyVersion(version("policy_version")?),
-        PhiVersion(version("phi_version")?),
-    );
     let restored = learner.progress();
     learner.continue_versions_after(policy, phi);
     let now = learner.progress();
@@ -286,4 +294,32 @@ fn write_final_status(ctx: &RunContext, learner: &Learner, reason: &str) -> anyh
             "policy_version": p.policy_version.0, "stop_reason": reason,
         }),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_published_versions_file_is_read_back_and_a_damaged_one_is_refused() {
+        let text = serde_json::json!({ "policy_version": 12, "phi_version": 3 }).to_string();
+        assert_eq!(
+            published_versions(&text),
+            Some((PolicyVersion(12), PhiVersion(3)))
+        );
+        assert_eq!(
+            published_versions(&text[..text.len() - 2]),
+            None,
+            "truncated"
+        );
+        assert_eq!(
+            published_versions(r#"{"policy_version": 12}"#),
+            None,
+            "φ version missing"
+        );
+        assert_eq!(
+            published_versions(r#"{"policy_version": -1, "phi_version": 3}"#),
+            None
+        );
+    }
 }
