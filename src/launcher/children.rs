@@ -17,7 +17,8 @@ use anyhow::Context;
 
 use crate::run::RunContext;
 
-/// First restart delay of a crashed actor; doubles with each crash, up to [`MAX_BACKOFF`].
+/// First restart delay of a crashed process; doubles with each of its crashes, up to
+/// [`MAX_BACKOFF`].
 const FIRST_BACKOFF: Duration = Duration::from_millis(500);
 const MAX_BACKOFF: Duration = Duration::from_secs(30);
 /// How long a child may take to exit after SIGTERM before it is killed.
@@ -230,7 +231,9 @@ impl Children {
     /// Counts a crash of `kind` in its family's window; past the limit, the crash loop error.
     fn note_crash(&mut self, kind: ChildKind, status: &str, now: Instant) -> anyhow::Result<()> {
         let run = &self.ctx.config.run;
-        let window = Duration::from_secs_f64(run.restart_window_mins * 60.0);
+        // Validated finite and > 0; a window too long for a Duration is as good as forever.
+        let window =
+            Duration::try_from_secs_f64(run.restart_window_mins * 60.0).unwrap_or(Duration::MAX);
         let crashes = self.recent_crashes.entry(kind.family()).or_default();
         crashes.push_back(now);
         while crashes
