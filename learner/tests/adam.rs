@@ -213,3 +213,30 @@ fn a_variable_that_is_not_f32_is_refused() {
     let err = Adam::new(vec![v], AdamParams::default()).unwrap_err();
     assert!(err.to_string().contains("only f32"), "{err}");
 }
+
+#[test]
+fn weight_decay_adds_lambda_theta_to_the_gradient_as_torch_adam() {
+    // A zero loss gradient leaves only λ·θ: Adam's first step is lr · λθ / (|λθ| + ε), i.e.
+    // lr · sign(θ) up to ε — torch.optim.Adam(weight_decay=λ) on a parameter with zero grad.
+    let cpu = Device::Cpu;
+    let w = Var::from_slice(&[2.0f32, -0.5], 2, &cpu).unwrap();
+    let params = AdamParams {
+        weight_decay: 0.1,
+        ..AdamParams::with_lr(0.01)
+    };
+    let mut opt = Adam::new(vec![w.clone()], params).unwrap();
+    let zeros = Tensor::zeros(2, candle_core::DType::F32, &cpu).unwrap();
+    let loss = (w.as_tensor() * zeros).unwrap().sum_all().unwrap();
+    opt.backward_step(&loss).unwrap();
+    let got: Vec<f32> = w.as_tensor().to_vec1().unwrap();
+    let want = [
+        2.0 - 0.01 * 0.2 / (0.2 + 1e-8),
+        -0.5 + 0.01 * 0.05 / (0.05 + 1e-8),
+    ];
+    assert_close(&got, &want, 1e-7, "one step with weight decay only");
+    let state = opt.export_state();
+    assert!(
+        (state.m[0][0] - 0.1 * 0.1 * 2.0).abs() < 1e-7,
+        "m = (1 − β₁)·λθ"
+    );
+}

@@ -137,6 +137,43 @@ fn a_restored_learner_writes_the_same_files_and_trains_on_exactly_like_the_origi
 }
 
 #[test]
+fn a_restored_deterministic_low_level_has_its_targets_and_adam_states_and_trains_on_identically() {
+    let mut config = config();
+    config.learner.low.algo = protocol::config::LowAlgo::Deterministic;
+    config.learner.low.deterministic.actor_hidden = vec![16, 16];
+    config.learner.low.deterministic.critic_hidden = vec![16, 16];
+    let dir = scratch("deterministic");
+    let mut original = Learner::new(&config, DIMS, 7).unwrap();
+    play(&mut original, 0..10);
+    assert!(original.progress().updates_low > 3, "targets moved");
+    let saved = original.save_checkpoint(&config, &dir).unwrap();
+    let optim = fs::read(saved.path.join("optim.safetensors")).unwrap();
+    let target = fs::read(saved.path.join("target.safetensors")).unwrap();
+    let target = safetensors::SafeTensors::deserialize(&target).unwrap();
+    assert!(
+        target.names().iter().any(|n| n.starts_with("low_policy.")),
+        "the target actor is saved"
+    );
+    let optim = safetensors::SafeTensors::deserialize(&optim).unwrap();
+    for key in ["low.actor.m.0", "low.critic.v.0"] {
+        assert!(optim.names().contains(&key), "{key} saved");
+    }
+
+    let (mut restored, _) = Learner::restore_checkpoint(&config, DIMS, &saved.path).unwrap();
+    let dir2 = scratch("deterministic-again");
+    let again = restored.save_checkpoint(&config, &dir2).unwrap();
+    assert_eq!(again.manifest.files, saved.manifest.files);
+    play(&mut original, 10..14);
+    play(&mut restored, 10..14);
+    assert_eq!(restored.progress(), original.progress());
+    assert_eq!(losses(&restored), losses(&original));
+    assert_eq!(
+        nets::to_safetensors_bytes(restored.policy_varmap()).unwrap(),
+        nets::to_safetensors_bytes(original.policy_varmap()).unwrap()
+    );
+}
+
+#[test]
 fn only_the_newest_two_checkpoints_are_kept_and_unfinished_ones_are_ignored() {
     let dir = scratch("keep");
     let l = trained();

@@ -191,9 +191,10 @@ fn the_high_loss_on_a_reparameterised_policy_sample_matches_numpy() {
 #[test]
 fn the_low_loss_moves_the_policy_only_through_the_aligned_branch() {
     let (policy, vm) = policy();
+    let policy = LowPolicy::Gaussian(policy);
     let base = mat(&[0.4, -0.8], 2, 1);
     let r_idx = mat(&[1.0, 2.0, -1.0, 0.5], 2, 2);
-    let aligned = low_action(&LowPolicy::Gaussian(policy.clone()), &base, &r_idx).unwrap();
+    let aligned = low_action(&policy, &base, &r_idx).unwrap();
     close(
         "aligned action",
         &flat(&aligned),
