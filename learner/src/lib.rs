@@ -14,8 +14,9 @@
 //! - [`schedule`]: the run-wide schedule (training episodes, `count_prob`, `fr_prob`).
 //! - [`si`]: hierarchical self-imitation: the (s₀, s_t, g) buffer, route indices, the two
 //!   losses, the [`si::RouteSource`] the binary implements, and the SI steps.
-//! - [`deterministic`]: losses of the reference code's deterministic low level (not wired yet).
-//! - [`setup`]: the networks (published policy set, online and target critics).
+//! - [`deterministic`]: the reference code's deterministic low level: losses and update.
+//! - [`setup`]: the networks (published policy set, online and target critics) and the
+//!   [`setup::LowLevel`] of either algorithm.
 //! - [`learner`]: the [`Learner`] itself: ingest, train, publish, progress, metrics.
 //!
 //! Dependencies: `protocol` (wire types, config) and `nets` (networks) only.
