@@ -280,12 +280,15 @@ fn a_run_survives_sigkills_of_every_process_kind_and_loses_only_what_crashes_mus
             .map(|(_, v)| v)
             .sum::<f64>()
     };
-    println!(
-        "while the graph-service was away (current actor incarnations): {} graph requests unanswered, \
-         {} exploration fallbacks of {} exploration decisions",
-        total("actor/graph_unreachable"),
+    let (explored, fallbacks) = (
+        total("actor/explore_decisions"),
         total("actor/explore_fallbacks"),
-        total("actor/explore_decisions")
+    );
+    println!(
+        "graph-service clients (current actor incarnations): {} requests unanswered in time; \
+         {fallbacks} of {} explore-subgoal requests fell back to the policy (no answer or not ready)",
+        total("actor/graph_unreachable"),
+        explored + fallbacks
     );
 
     assert_eq!(
