@@ -134,7 +134,7 @@ fn key_of(p: LatentPoint, cell: f64) -> [i32; 2] {
 }
 
 /// Colour of a node with `visits`, on a log scale up to `most`.
-fn visit_color(visits: u64, most: u64) -> RGBColor {
+pub(crate) fn visit_color(visits: u64, most: u64) -> RGBColor {
     let t = if most == 0 { 0.0 } else { (1.0 + visits as f64).ln() / (1.0 + most as f64).ln() };
     let mix = |axis: usize| (FEW_VISITS[axis] + t * (MANY_VISITS[axis] - FEW_VISITS[axis])).round() as u8;
     RGBColor(mix(0), mix(1), mix(2))

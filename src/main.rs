@@ -9,6 +9,7 @@ mod eval_cmd;
 mod graph_png;
 mod graph_tool;
 mod launcher;
+mod maze_graph_png;
 mod plot;
 mod proc;
 mod run;

@@ -203,17 +203,21 @@ impl CheckpointTimer {
     }
 
     /// Writes a checkpoint if one is due and no φ round runs; a failed write is logged and
-    /// retried at the next interval (training goes on).
-    pub fn tick(&mut self, ctx: &RunContext, learner: &Learner) {
+    /// retried at the next interval (training goes on). True when one was written.
+    pub fn tick(&mut self, ctx: &RunContext, learner: &Learner) -> bool {
         if self.last.elapsed() < self.interval {
-            return;
+            return false;
         }
         match save_checkpoint(ctx, learner) {
-            Ok(Some(_)) => self.last = Instant::now(),
-            Ok(None) => {}
+            Ok(Some(_)) => {
+                self.last = Instant::now();
+                true
+            }
+            Ok(None) => false,
             Err(err) => {
                 tracing::error!("writing a checkpoint failed: {err:#}");
                 self.last = Instant::now();
+                false
             }
         }
     }

@@ -5,10 +5,11 @@
 //! graph-service (HESS exploration, reaching reports) by calling its request handler directly,
 //! with the same encoded messages as in process mode, and so does the learner for its
 //! self-imitation routes. Evaluations run inline when they fall due (same schedule and outputs
-//! as the evaluator process). Checkpoints are written every `run.checkpoint_interval_mins` and
-//! at the end; SIGINT or SIGTERM ends the run after the actor round in hand with a last metrics
-//! line and a checkpoint. A resumed serial run continues the learner's state; the actors start
-//! new episodes (their open episodes and RNG states are not checkpointed), so it is not
+//! as the evaluator process). Checkpoints (learner and graph-service) are written every
+//! `run.checkpoint_interval_mins` and at the end; SIGINT or SIGTERM ends the run after the
+//! actor round in hand with a last metrics line and a checkpoint. A resumed serial run
+//! continues the learner's and the graph-service's state; the actors start new episodes (their
+//! open episodes and RNG states are not checkpointed), so it is not
 //! bit-identical to an uninterrupted run.
 
 use std::io::{BufWriter, Write};
@@ -22,9 +23,11 @@ use learner::Learner;
 use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
 use protocol::ActorId;
 
+use crate::maze_graph_png::{MazeGraphPlot, REDRAW_EPISODES};
 use crate::proc::actor::{actor_metrics, ReachMeans};
 use crate::proc::common::{task_info, CoverageTracker, GraphRoutes};
 use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
+use crate::proc::graph_service::{open_service, Checkpoints};
 use crate::run::RunContext;
 use crate::weights_file::WeightsSaver;
 
@@ -42,7 +45,8 @@ extern "C" fn request_stop(_signal: libc::c_int) {
 fn install_stop_handlers() {
     for signal in [libc::SIGINT, libc::SIGTERM] {
         // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
-        let previous = unsafe { libc::signal(signal, request_stop as *const () as libc::sighandler_t) };
+        let previous =
+            unsafe { libc::signal(signal, request_stop as *const () as libc::sighandler_t) };
         if previous == libc::SIG_ERR {
             tracing::warn!(signal, "could not install a stop handler; the signal will kill the run without a checkpoint");
         }
@@ -55,19 +59,40 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let dims = task.dims;
     let seed = config.run.seed;
     let mut learner = crate::run::open_learner(&ctx, dims, task.episode_length)?;
-    let mut graph = GraphService::new(config, dims, seed).context("building the graph-service")?;
+    let graph_dir = ctx.checkpoint_dir().join(graph_service::checkpoint::SUBDIR);
+    let (mut graph, start) = open_service(&ctx, &graph_dir, dims)?;
+    let mut graph_checkpoints = Checkpoints::new(graph_dir, config.run.checkpoint_interval_mins);
+    tracing::info!(
+        restored_stored_steps = start.restored_stored_steps,
+        "serial graph-service {}",
+        start
+            .restored_from
+            .as_ref()
+            .map_or("started empty".to_owned(), |p| format!(
+                "restored from {}",
+                p.display()
+            ))
+    );
+    let mut picture = SerialPicture::new(&ctx)?;
     let mut actors = (0..config.run.n_actors as u32)
         .map(|id| Actor::new(config, ActorId(id), seed))
         .collect::<Result<Vec<_>, _>>()
         .context("building the actors")?;
     // A resumed run continues its metrics file.
-    let metrics_file =
-        std::fs::OpenOptions::new().create(true).write(true).append(ctx.resume).truncate(!ctx.resume).open(ctx.run_dir.join("metrics.jsonl"))?;
+    let metrics_file = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .append(ctx.resume)
+        .truncate(!ctx.resume)
+        .open(ctx.run_dir.join("metrics.jsonl"))?;
     let mut metrics = BufWriter::new(metrics_file);
     let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
     let mut eval = SerialEval::new(config, &ctx.run_dir)?;
     let mut coverage = CoverageTracker::new(config, task.layout)?;
-    eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
+    eval.on_weights(
+        &ctx,
+        broadcast_weights(&mut learner, &mut actors, &mut graph)?,
+    )?;
     let mut last_episodes = 0;
     let mut checkpoints = crate::run::CheckpointTimer::new(config);
     install_stop_handlers();
@@ -86,23 +111,52 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             graph.ingest(&chunk.header, &chunk.records)?;
         }
         catch_up(&mut learner)?;
-        eval.on_weights(&ctx, broadcast_weights(&mut learner, &mut actors, &mut graph)?)?;
+        eval.on_weights(
+            &ctx,
+            broadcast_weights(&mut learner, &mut actors, &mut graph)?,
+        )?;
         self_imitate(&mut learner, &mut graph)?;
         let episodes = learner.ingest_stats().episodes_completed;
         if episodes != last_episodes {
-            write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
+            write_line(
+                &mut metrics,
+                &learner,
+                &graph,
+                &actors,
+                &mut actor_lines,
+                &eval.latest,
+                &coverage,
+            )?;
             last_episodes = episodes;
         }
-        // Reads the learner only: the run's metrics do not depend on when checkpoints fall.
-        checkpoints.tick(&ctx, &learner);
+        // Reads the learner and the graph only: the run's metrics do not depend on when
+        // checkpoints fall. The graph-service's checkpoint is written with the learner's.
+        if checkpoints.tick(&ctx, &learner) {
+            graph_checkpoints.write(&graph);
+        }
+        picture.tick(episodes, &graph);
     }
-    write_line(&mut metrics, &learner, &graph, &actors, &mut actor_lines, &eval.latest, &coverage)?;
+    write_line(
+        &mut metrics,
+        &learner,
+        &graph,
+        &actors,
+        &mut actor_lines,
+        &eval.latest,
+        &coverage,
+    )?;
     metrics.flush()?;
     eval.finish();
     crate::run::final_checkpoint(&ctx, &mut learner)?;
+    graph_checkpoints.write(&graph);
+    picture.draw_if_behind(&graph);
     let env_steps = learner.progress().env_steps_ingested;
     if stopped {
-        tracing::info!(env_steps, "stopped by signal; checkpoint written, run folder {}", ctx.run_dir.display());
+        tracing::info!(
+            env_steps,
+            "stopped by signal; checkpoint written, run folder {}",
+            ctx.run_dir.display()
+        );
     } else {
         tracing::info!(env_steps, "serial run finished");
     }
@@ -172,7 +226,10 @@ struct SerialEval {
 impl SerialEval {
     fn new(config: &protocol::Config, run_dir: &std::path::Path) -> anyhow::Result<Self> {
         let evaluator = if config.eval.n_episodes > 0 {
-            Some(Evaluator::new(config, crate::proc::evaluator::eval_seed(config)).context("building the evaluator")?)
+            Some(
+                Evaluator::new(config, crate::proc::evaluator::eval_seed(config))
+                    .context("building the evaluator")?,
+            )
         } else {
             None
         };
@@ -186,7 +243,11 @@ impl SerialEval {
         })
     }
 
-    fn on_weights(&mut self, ctx: &RunContext, published: Option<(protocol::WeightsHeader, Vec<u8>)>) -> anyhow::Result<()> {
+    fn on_weights(
+        &mut self,
+        ctx: &RunContext,
+        published: Option<(protocol::WeightsHeader, Vec<u8>)>,
+    ) -> anyhow::Result<()> {
         let Some((header, bytes)) = published else {
             return Ok(());
         };
@@ -213,11 +274,52 @@ impl SerialEval {
     }
 }
 
+/// `plots/graph_latest.png` in serial mode: redrawn when the graph changed, at most once per
+/// [`REDRAW_EPISODES`] completed episodes (no clock in the loop), and at the end.
+struct SerialPicture {
+    plot: Option<MazeGraphPlot>,
+    last_episodes: Option<u64>,
+}
+
+impl SerialPicture {
+    fn new(ctx: &RunContext) -> anyhow::Result<Self> {
+        Ok(Self {
+            plot: MazeGraphPlot::new(&ctx.config, &ctx.run_dir)?,
+            last_episodes: None,
+        })
+    }
+
+    fn tick(&mut self, episodes: u64, graph: &GraphService) {
+        if self
+            .last_episodes
+            .is_none_or(|last| episodes >= last + REDRAW_EPISODES)
+            && self.draw_if_behind(graph)
+        {
+            self.last_episodes = Some(episodes);
+        }
+    }
+
+    /// Draws if the graph changed since the last picture; true when it drew.
+    fn draw_if_behind(&mut self, graph: &GraphService) -> bool {
+        match self.plot.as_mut().filter(|p| p.behind(graph)) {
+            Some(plot) => {
+                plot.draw(graph);
+                true
+            }
+            None => false,
+        }
+    }
+}
+
 /// The in-process graph-service as the actors' transport: its request handler, called directly.
 struct InProcessGraph<'a>(&'a mut GraphService);
 
 impl GraphTransport for InProcessGraph<'_> {
-    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+    fn call(
+        &mut self,
+        header: &GraphRequestHeader,
+        body: &[u8],
+    ) -> Result<(GraphResponseHeader, Vec<u8>), String> {
         Ok(self.0.handle(header, body))
     }
 }
@@ -257,7 +359,10 @@ fn write_line(
             object.insert(format!("actor{i}/{name}"), serde_json::json!(value));
         }
     }
-    object.insert("graph-service/graph/stored_steps".to_owned(), serde_json::json!(graph.stats().stored_steps));
+    object.insert(
+        "graph-service/graph/stored_steps".to_owned(),
+        serde_json::json!(graph.stats().stored_steps),
+    );
     for (name, value) in eval {
         object.insert(format!("evaluator0/{name}"), serde_json::json!(value));
     }

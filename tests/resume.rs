@@ -138,6 +138,19 @@ fn env_steps_per_line(dir: &Path) -> Vec<u64> {
         .collect()
 }
 
+/// `graph-service/graph/stored_steps` of every line of a serial run's `metrics.jsonl`.
+fn stored_steps_per_line(dir: &Path) -> Vec<u64> {
+    std::fs::read_to_string(dir.join("metrics.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter_map(|v| {
+            v.get("graph-service/graph/stored_steps")
+                .and_then(Value::as_u64)
+        })
+        .collect()
+}
+
 #[test]
 fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
@@ -155,7 +168,10 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     );
     let graph_before = dir.status("graph-service");
     assert!(graph_before["restored_from"].is_null(), "{graph_before}");
-    assert!(as_u64(&graph_before, "checkpoints_written") >= 1, "{graph_before}");
+    assert!(
+        as_u64(&graph_before, "checkpoints_written") >= 1,
+        "{graph_before}"
+    );
     let graph_ckpt = dir.0.join("checkpoints/graph-service/ckpt-000001");
     assert!(graph_ckpt.join("manifest.json").exists(), "{graph_before}");
     let before = dir.status("learner");
@@ -223,7 +239,7 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
 }
 
 #[test]
-fn a_serial_run_resumes_too_and_another_config_is_refused_before_starting() {
+fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_before_starting() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = RunDir::new("serial");
     let first = train(&dir, &["--serial", "--set", "run.max_episodes=4"]);
@@ -234,6 +250,21 @@ fn a_serial_run_resumes_too_and_another_config_is_refused_before_starting() {
     );
     assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
     let steps = *env_steps_per_line(&dir.0).last().unwrap();
+    let stored = stored_steps_per_line(&dir.0);
+    let first_lines = stored.len();
+    let stored_at_stop = *stored.last().unwrap();
+    let graph_ckpt = dir
+        .0
+        .join("checkpoints/graph-service/ckpt-000001/manifest.json");
+    assert!(
+        graph_ckpt.exists(),
+        "serial mode checkpoints its graph-service"
+    );
+    let picture = std::fs::read(dir.0.join("plots/graph_latest.png")).unwrap_or_default();
+    assert!(
+        picture.starts_with(b"\x89PNG"),
+        "serial mode draws the graph"
+    );
 
     let second = train(&dir, &["--serial", "--set", "run.max_episodes=8"]);
     assert!(
@@ -244,6 +275,13 @@ fn a_serial_run_resumes_too_and_another_config_is_refused_before_starting() {
     assert!(String::from_utf8_lossy(&second.stdout).contains("resuming from checkpoint 1"));
     let lines = env_steps_per_line(&dir.0);
     assert!(*lines.last().unwrap() > steps, "{lines:?}");
+    // The graph store continued: the second launch's first line stores more states than the
+    // first launch had at its stop (a fresh store would hold one episode's states only).
+    let stored = stored_steps_per_line(&dir.0);
+    assert!(
+        stored[first_lines] > stored_at_stop,
+        "{stored:?} (first launch: {first_lines} lines)"
+    );
 
     let refused = train(&dir, &["--serial", "--set", "replay.capacity_steps=50000"]);
     assert!(!refused.status.success());

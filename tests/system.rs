@@ -135,6 +135,12 @@ fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() 
         let bytes = std::fs::read(run.dir.join(picture)).unwrap_or_default();
         assert!(bytes.starts_with(b"\x89PNG"), "{picture} is a PNG");
     }
+    // The graph-service drew the graph in the maze (the U-maze is square: 600 × 600 pixels,
+    // walls dark grey, so not blank).
+    assert_eq!(
+        png_size(&run.dir.join("plots/graph_latest.png")),
+        (600, 600)
+    );
     let events: Vec<_> = std::fs::read_dir(run.dir.join("tensorboard"))
         .unwrap()
         .flatten()
@@ -259,4 +265,17 @@ fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
     assert!(other.wait().success());
     let c = std::fs::read_to_string(other.dir.join("metrics.jsonl")).unwrap();
     assert_ne!(a, c, "another seed gives another run");
+}
+
+/// Width and height of the PNG at `path`, after decoding every pixel; panics unless it decodes
+/// and has a non-white pixel.
+fn png_size(path: &std::path::Path) -> (u32, u32) {
+    let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .expect("a PNG header");
+    let mut pixels = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut pixels).expect("PNG pixels decode");
+    assert!(pixels.iter().any(|&b| b != 255), "the picture is not blank");
+    (info.width, info.height)
 }

@@ -34,14 +34,16 @@ pub enum RenderError {
     Drawing { path: String, message: String },
 }
 
-/// Maps world xy (metres) to pixels.
-struct PixelMap {
+/// Maps world xy (metres) to pixels, as [`render_maze_png`] draws them (public so other
+/// pictures of the maze draw their layers on the same walls).
+pub struct PixelMap {
     bounds: Rect,
     px_per_m: f32,
 }
 
 impl PixelMap {
-    fn new(bounds: Rect) -> PixelMap {
+    /// The map of `bounds` with its longest side [`IMAGE_SIDE_PX`] pixels.
+    pub fn new(bounds: Rect) -> PixelMap {
         let longest_m = bounds.width().max(bounds.height());
         PixelMap {
             bounds,
@@ -49,19 +51,22 @@ impl PixelMap {
         }
     }
 
-    fn size(&self) -> (u32, u32) {
+    /// Picture size, pixels.
+    pub fn size(&self) -> (u32, u32) {
         let w = (self.bounds.width() * self.px_per_m).round() as u32;
         let h = (self.bounds.height() * self.px_per_m).round() as u32;
         (w.max(1), h.max(1))
     }
 
-    fn px(&self, xy: [f32; 2]) -> (i32, i32) {
+    /// Pixel of world point `xy`.
+    pub fn px(&self, xy: [f32; 2]) -> (i32, i32) {
         let x = (xy[0] - self.bounds.low[0]) * self.px_per_m;
         let y = (xy[1] - self.bounds.low[1]) * self.px_per_m;
         (x.round() as i32, y.round() as i32)
     }
 
-    fn len(&self, metres: f32) -> i32 {
+    /// A length in pixels.
+    pub fn len(&self, metres: f32) -> i32 {
         (metres * self.px_per_m).round() as i32
     }
 }
@@ -86,11 +91,14 @@ pub fn render_maze_png(
     root.present().map_err(|e| fail(&e))
 }
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
-type DrawResult<'a> =
+/// A drawing area of the bitmap backend.
+pub type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+/// What drawing on an [`Area`] returns.
+pub type DrawResult<'a> =
     Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
 
-fn draw_walls<'a>(root: &Area<'a>, map: &PixelMap, maze: &Maze) -> DrawResult<'a> {
+/// Draws the wall cells of `maze`, dark grey.
+pub fn draw_walls<'a>(root: &Area<'a>, map: &PixelMap, maze: &Maze) -> DrawResult<'a> {
     let half = maze.cell_size_m() / 2.0;
     for cell in maze.wall_cells() {
         let [x, y] = maze.cell_center(cell);

@@ -18,6 +18,8 @@
 //! - [`checkpoint`]: [`GraphService::save`] / [`GraphService::restore`] (atomic folders).
 //! - [`server`]: [`GraphService::handle`], the request handler.
 //! - [`service`]: [`GraphService`] itself: ingest, weights, rebuild, queries, stats.
+//! - [`xy`]: the graph placed in the world (node xy = mean achieved goal of its stored states)
+//!   with the last frontier answered, for the run's maze picture.
 //!
 //! Invariants: bad input (chunks, weights, requests) is refused with a reason and counted,
 //! never a panic, and leaves the state unchanged.
@@ -37,6 +39,7 @@ pub mod route_table;
 pub mod server;
 pub mod service;
 pub mod store;
+pub mod xy;
 
 pub use error::GraphServiceError;
 pub use frontier::{Frontier, NoRoute};

@@ -227,7 +227,7 @@ impl GraphService {
         };
         let found = frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng);
         self.stats.frontier_not_found += u64::from(found.is_err());
-        let answer = found.map_err(|why| why.reason()).and_then(|f| {
+        let answer = found.as_ref().map_err(|why| why.reason()).and_then(|f| {
             Ok(FrontierRoute {
                 // A frontier node is a node of this graph, so it has a position.
                 frontier: graph
@@ -237,6 +237,9 @@ impl GraphService {
                 distance: f.distance as f32,
             })
         });
+        if let Ok(f) = &found {
+            self.note_frontier(f.node, &f.route);
+        }
         Answer::Ok(GraphResponse::FrontierRoute(answer))
     }
 

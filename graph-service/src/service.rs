@@ -33,6 +33,7 @@ use crate::grid::Grid;
 use crate::hess::{ExploreChoice, HessMaps, HessParams};
 use crate::phi::{Phi, PhiLoader};
 use crate::store::{ChunkStates, TrajectoryStore};
+use crate::xy::LastFrontier;
 
 /// Counters and sizes of the graph-service.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -104,6 +105,8 @@ pub struct GraphService {
     pub(crate) graph_version: u64,
     pub(crate) rng: Pcg64,
     pub(crate) stats: GraphStats,
+    /// The last frontier answered, for the maze picture ([`crate::xy`]); not checkpointed.
+    pub(crate) last_frontier: Option<LastFrontier>,
 }
 
 impl GraphService {
@@ -149,6 +152,7 @@ impl GraphService {
             graph_version: 0,
             rng: Pcg64::seed_from_u64(seed),
             stats: GraphStats::default(),
+            last_frontier: None,
         })
     }
 
@@ -309,7 +313,9 @@ impl GraphService {
     /// Without a graph the answer is [`NoRoute::EmptyGraph`].
     pub fn frontier_route(&mut self, from: LatentPoint) -> Result<Frontier, NoRoute> {
         let graph = self.graph.as_ref().ok_or(NoRoute::EmptyGraph)?;
-        frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng)
+        let found = frontier::frontier(graph, from, self.frontier_fraction, &mut self.rng)?;
+        self.note_frontier(found.node, &found.route);
+        Ok(found)
     }
 
     /// The route between the cells of two points ([`frontier::route`]).

@@ -1,5 +1,6 @@
 //! `asi graph-service`: stores every trajectory chunk, follows φ as the learner publishes it,
-//! and answers graph requests. Sleeps on its channels' events.
+//! and answers graph requests. Sleeps on its channels' events. Draws the graph in the maze
+//! (`plots/graph_latest.png`, [`crate::maze_graph_png`]) after rebuilds, at most once a minute.
 //!
 //! Checkpoints (`graph_service::checkpoint`): at start the service is restored from the newest
 //! usable checkpoint in `run_dir/checkpoints/graph-service/`, and it writes one every
@@ -22,6 +23,7 @@ use protocol::{ControlCommand, ProcessRole};
 
 use super::common::{newest_weights, node, task_info, MetricsOut, StopWatch};
 use crate::channels::{Channels, TrajectorySubscriber, WeightsSubscriber};
+use crate::maze_graph_png::{MazeGraphPlot, REDRAW_INTERVAL};
 use crate::run::RunContext;
 
 /// Sleep when idle; chunks, weights, requests and control messages wake the service earlier.
@@ -40,20 +42,42 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let weights = channels.weights_subscriber(&node)?;
     let control = channels.control_subscriber(&node)?;
     let server = channels.graph_server(&node)?;
-    let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::GraphService, 0, config);
-    let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
-    let _g = [trajectories.listener(), weights.listener(), control.listener(), server.listener()]
-        .into_iter()
-        .map(|l| waitset.attach_notification(l).map_err(|e| anyhow::anyhow!("{e:?}")))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut metrics = MetricsOut::new(
+        channels.metrics_publisher(&node)?,
+        ProcessRole::GraphService,
+        0,
+        config,
+    );
+    let waitset = WaitSetBuilder::new()
+        .create::<Ipc>()
+        .map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
+    let _g = [
+        trajectories.listener(),
+        weights.listener(),
+        control.listener(),
+        server.listener(),
+    ]
+    .into_iter()
+    .map(|l| {
+        waitset
+            .attach_notification(l)
+            .map_err(|e| anyhow::anyhow!("{e:?}"))
+    })
+    .collect::<anyhow::Result<Vec<_>>>()?;
     let stop = StopWatch::new();
+    let mut picture = GraphPicture::new(ctx)?;
     ctx.mark_ready("graph-service")?;
     let reason = loop {
-        let _ = waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, IDLE_WAIT);
+        let _ = waitset
+            .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, IDLE_WAIT);
         if let Some(reason) = stop.should_stop(&node) {
             break reason;
         }
-        if control.drain()?.iter().any(|m| m.command() == Ok(ControlCommand::Stop)) {
+        if control
+            .drain()?
+            .iter()
+            .any(|m| m.command() == Ok(ControlCommand::Stop))
+        {
             break "stop requested";
         }
         ingest_all(&mut service, &trajectories);
@@ -64,13 +88,18 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             metrics.publish(stats.stored_steps, &graph_metrics(&stats));
         }
         checkpoints.tick(&service);
+        picture.tick(&service);
     };
     ingest_all(&mut service, &trajectories);
     tracing::info!(reason, "graph-service stopping");
     checkpoints.write(&service);
+    picture.draw_if_behind(&service);
     let stats = service.stats();
-    let per_actor: serde_json::Map<String, serde_json::Value> =
-        stats.per_actor_steps.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v))).collect();
+    let per_actor: serde_json::Map<String, serde_json::Value> = stats
+        .per_actor_steps
+        .iter()
+        .map(|(k, v)| (k.to_string(), serde_json::json!(v)))
+        .collect();
     ctx.write_status(
         "graph-service",
         &serde_json::json!({
@@ -86,33 +115,58 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
 }
 
 /// Where the service started from, for the log and the status file.
-struct Start {
+pub(crate) struct Start {
     /// The checkpoint restored, if any.
-    restored_from: Option<PathBuf>,
+    pub(crate) restored_from: Option<PathBuf>,
     /// Stored states after the restore (0 when started empty).
-    restored_stored_steps: u64,
+    pub(crate) restored_stored_steps: u64,
     /// Refused checkpoints, newest first, as `path: error`.
-    refused: Vec<String>,
+    pub(crate) refused: Vec<String>,
 }
 
 /// The service restored from the newest usable checkpoint in `dir`, else a new one (see the
-/// module doc for why a refused checkpoint does not stop the process).
-fn open_service(ctx: &RunContext, dir: &Path, dims: nets::TaskDims) -> anyhow::Result<(GraphService, Start)> {
+/// module doc for why a refused checkpoint does not stop the process). Serial mode opens its
+/// graph-service the same way.
+pub(crate) fn open_service(
+    ctx: &RunContext,
+    dir: &Path,
+    dims: nets::TaskDims,
+) -> anyhow::Result<(GraphService, Start)> {
     let config = &ctx.config;
     let clock = Instant::now();
-    let resumed = GraphService::restore_newest_valid(dir, config, dims).unwrap_or_else(|err: CheckpointError| {
-        Resumed { restored: None, refused: vec![(dir.to_path_buf(), err)] }
-    });
-    let refused: Vec<String> = resumed.refused.iter().map(|(path, err)| format!("{}: {err}", path.display())).collect();
+    let resumed = GraphService::restore_newest_valid(dir, config, dims).unwrap_or_else(
+        |err: CheckpointError| Resumed {
+            restored: None,
+            refused: vec![(dir.to_path_buf(), err)],
+        },
+    );
+    let refused: Vec<String> = resumed
+        .refused
+        .iter()
+        .map(|(path, err)| format!("{}: {err}", path.display()))
+        .collect();
     for problem in &refused {
-        tracing::error!("graph-service checkpoint refused, trying an older one or starting empty: {problem}");
+        tracing::error!(
+            "graph-service checkpoint refused, trying an older one or starting empty: {problem}"
+        );
     }
     let Some((service, ckpt)) = resumed.restored else {
         if !refused.is_empty() {
-            tracing::warn!("graph-service starting empty: no usable checkpoint in {}", dir.display());
+            tracing::warn!(
+                "graph-service starting empty: no usable checkpoint in {}",
+                dir.display()
+            );
         }
-        let service = GraphService::new(config, dims, config.run.seed).context("building the graph-service")?;
-        return Ok((service, Start { restored_from: None, restored_stored_steps: 0, refused }));
+        let service = GraphService::new(config, dims, config.run.seed)
+            .context("building the graph-service")?;
+        return Ok((
+            service,
+            Start {
+                restored_from: None,
+                restored_stored_steps: 0,
+                refused,
+            },
+        ));
     };
     let m = &ckpt.manifest;
     tracing::info!(
@@ -123,14 +177,18 @@ fn open_service(ctx: &RunContext, dir: &Path, dims: nets::TaskDims) -> anyhow::R
         "graph-service restored from {}",
         ckpt.path.display()
     );
-    let start = Start { restored_from: Some(ckpt.path), restored_stored_steps: m.stored_steps, refused };
+    let start = Start {
+        restored_from: Some(ckpt.path),
+        restored_stored_steps: m.stored_steps,
+        refused,
+    };
     Ok((service, start))
 }
 
 /// When the graph-service writes checkpoints: every `run.checkpoint_interval_mins` and at a
 /// clean stop. A failed write is logged, counted in the status and retried at the next
 /// interval; serving goes on.
-struct Checkpoints {
+pub(crate) struct Checkpoints {
     dir: PathBuf,
     interval: Duration,
     last: Instant,
@@ -140,7 +198,7 @@ struct Checkpoints {
 }
 
 impl Checkpoints {
-    fn new(dir: PathBuf, interval_mins: f64) -> Self {
+    pub(crate) fn new(dir: PathBuf, interval_mins: f64) -> Self {
         Self {
             dir,
             interval: Duration::from_secs_f64(interval_mins * 60.0),
@@ -159,7 +217,7 @@ impl Checkpoints {
     }
 
     /// Writes a checkpoint now and logs its size and write time (or the error).
-    fn write(&mut self, service: &GraphService) {
+    pub(crate) fn write(&mut self, service: &GraphService) {
         let clock = Instant::now();
         match service.save(&self.dir) {
             Ok(ckpt) => {
@@ -181,6 +239,41 @@ impl Checkpoints {
             }
         }
         self.last = Instant::now();
+    }
+}
+
+/// `plots/graph_latest.png` ([`MazeGraphPlot`]): redrawn when the graph changed, at most once
+/// per [`REDRAW_INTERVAL`], and at a clean stop.
+struct GraphPicture {
+    plot: Option<MazeGraphPlot>,
+    last: Option<Instant>,
+}
+
+impl GraphPicture {
+    fn new(ctx: &RunContext) -> anyhow::Result<Self> {
+        Ok(Self {
+            plot: MazeGraphPlot::new(&ctx.config, &ctx.run_dir)?,
+            last: None,
+        })
+    }
+
+    fn tick(&mut self, service: &GraphService) {
+        if self
+            .last
+            .is_none_or(|last| last.elapsed() >= REDRAW_INTERVAL)
+        {
+            self.draw_if_behind(service);
+        }
+    }
+
+    fn draw_if_behind(&mut self, service: &GraphService) {
+        let Some(plot) = self.plot.as_mut().filter(|p| p.behind(service)) else {
+            return;
+        };
+        let clock = Instant::now();
+        plot.draw(service);
+        tracing::debug!(secs = clock.elapsed().as_secs_f64(), "graph picture drawn");
+        self.last = Some(Instant::now());
     }
 }
 
@@ -207,17 +300,38 @@ fn graph_metrics(stats: &graph_service::GraphStats) -> Vec<(String, f64)> {
     vec![
         ("graph/stored_steps".to_owned(), stats.stored_steps as f64),
         ("graph/chunks".to_owned(), stats.chunks as f64),
-        ("graph/rejected_chunks".to_owned(), stats.rejected_chunks as f64),
+        (
+            "graph/rejected_chunks".to_owned(),
+            stats.rejected_chunks as f64,
+        ),
         ("graph/nodes".to_owned(), stats.n_nodes as f64),
         ("graph/edges".to_owned(), stats.n_edges as f64),
         ("graph/version".to_owned(), stats.graph_version as f64),
         ("graph/requests".to_owned(), stats.requests as f64),
-        ("graph/invalid_requests".to_owned(), stats.invalid_requests as f64),
-        ("graph/frontier_not_found".to_owned(), stats.frontier_not_found as f64),
-        ("graph/routes_not_found".to_owned(), stats.routes_not_found as f64),
-        ("graph/explore_answers".to_owned(), stats.explore_answers as f64),
-        ("graph/hess_visited_cells".to_owned(), stats.hess_visited_cells as f64),
-        ("graph/future_count_recomputes".to_owned(), stats.future_count_recomputes as f64),
+        (
+            "graph/invalid_requests".to_owned(),
+            stats.invalid_requests as f64,
+        ),
+        (
+            "graph/frontier_not_found".to_owned(),
+            stats.frontier_not_found as f64,
+        ),
+        (
+            "graph/routes_not_found".to_owned(),
+            stats.routes_not_found as f64,
+        ),
+        (
+            "graph/explore_answers".to_owned(),
+            stats.explore_answers as f64,
+        ),
+        (
+            "graph/hess_visited_cells".to_owned(),
+            stats.hess_visited_cells as f64,
+        ),
+        (
+            "graph/future_count_recomputes".to_owned(),
+            stats.future_count_recomputes as f64,
+        ),
         ("graph/reach_samples".to_owned(), stats.reach_samples as f64),
     ]
 }
