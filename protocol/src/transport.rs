@@ -600,6 +600,9 @@ where
     }
 }
 
+/// How often a waiting [`RpcClient::call`] checks that a server still holds its request.
+pub const SERVER_CHECK_INTERVAL: Duration = Duration::from_millis(100);
+
 /// The asking side of a request–response channel.
 pub struct RpcClient<Q, R>
 where
@@ -653,17 +656,55 @@ where
 
     /// Sends one request and waits up to `timeout` for its response. A server that does not
     /// answer in time is a [`TransportError::Receive`] naming the timeout.
+    ///
+    /// Every [`SERVER_CHECK_INTERVAL`] the wait checks that a server still holds the request;
+    /// when none does (there was no server, or the one that got it died and its port was
+    /// cleaned up, e.g. by the launcher after a crash), the request is sent again to whichever
+    /// server is connected now. So a client waiting on a killed graph-service is answered by
+    /// its restarted successor instead of waiting out the whole timeout.
     pub fn call(
         &self,
         header: Q,
         body: &[u8],
         timeout: Duration,
     ) -> Result<(R, Vec<u8>), TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send {
+        let recv_err = |e: &dyn Debug| TransportError::Receive {
             service: self.name.clone(),
             reason: format!("{e:?}"),
         };
-        let recv_err = |e: &dyn Debug| TransportError::Receive {
+        let deadline = std::time::Instant::now() + timeout;
+        let mut pending = self.send_request(header, body)?;
+        loop {
+            if let Some(response) = pending.receive().map_err(|e| recv_err(&e))? {
+                return Ok((*response.user_header(), response.payload().to_vec()));
+            }
+            if !pending.is_connected() {
+                // A response sent just before its server let go of the request is kept.
+                if let Some(response) = pending.receive().map_err(|e| recv_err(&e))? {
+                    return Ok((*response.user_header(), response.payload().to_vec()));
+                }
+                // Dropped first: it counts against the client's active requests.
+                drop(pending);
+                pending = self.send_request(header, body)?;
+            }
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Err(recv_err(&format!("no response within {timeout:?}")));
+            }
+            self.listener
+                .timed_wait(|_| {}, left.min(SERVER_CHECK_INTERVAL))
+                .map_err(|e| recv_err(&e))?;
+        }
+    }
+
+    /// Loans, writes, sends and notifies one request.
+    fn send_request(
+        &self,
+        header: Q,
+        body: &[u8],
+    ) -> Result<iceoryx2::pending_response::PendingResponse<Ipc, [u8], Q, [u8], R>, TransportError>
+    {
+        let send_err = |e: &dyn Debug| TransportError::Send {
             service: self.name.clone(),
             reason: format!("{e:?}"),
         };
@@ -677,18 +718,6 @@ where
             .send()
             .map_err(|e| send_err(&e))?;
         self.notifier.notify().map_err(|e| send_err(&e))?;
-        let deadline = std::time::Instant::now() + timeout;
-        loop {
-            if let Some(response) = pending.receive().map_err(|e| recv_err(&e))? {
-                return Ok((*response.user_header(), response.payload().to_vec()));
-            }
-            let left = deadline.saturating_duration_since(std::time::Instant::now());
-            if left.is_zero() {
-                return Err(recv_err(&format!("no response within {timeout:?}")));
-            }
-            self.listener
-                .timed_wait(|_| {}, left)
-                .map_err(|e| recv_err(&e))?;
-        }
+        Ok(pending)
     }
 }

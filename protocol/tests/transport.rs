@@ -173,3 +173,52 @@ fn a_call_without_a_server_times_out_with_an_error() {
         .unwrap_err();
     assert!(err.to_string().contains("no response"), "{err}");
 }
+
+#[test]
+fn a_call_whose_server_went_away_is_answered_by_the_next_server() {
+    use ::protocol::transport::{RpcClient, RpcServer};
+    let service = unique("rpc-restart");
+    let first_node = open_node("test-first-server").unwrap();
+    let first = RpcServer::<TestHeader, TestHeader>::open(&first_node, &service, 4, 64).unwrap();
+    let client_service = service.clone();
+    // Far longer than the test needs: without the re-send the call would end in this timeout.
+    let call = std::thread::spawn(move || {
+        let client_node = open_node("test-client").unwrap();
+        let client =
+            RpcClient::<TestHeader, TestHeader>::open(&client_node, &client_service, 4, 64)
+                .unwrap();
+        client.call(TestHeader { chunk: 4, n: 1 }, &[9], Duration::from_secs(60))
+    });
+    // The request has been sent once the first server's listener is woken; that server then
+    // goes away without answering, and a second one takes its place.
+    let mut woken = false;
+    while !woken {
+        first
+            .listener()
+            .timed_wait(|_| woken = true, Duration::from_secs(60))
+            .unwrap();
+    }
+    drop(first);
+    drop(first_node);
+    let second_node = open_node("test-second-server").unwrap();
+    let second = RpcServer::<TestHeader, TestHeader>::open(&second_node, &service, 4, 64).unwrap();
+    let mut served = 0;
+    while !call.is_finished() {
+        served += second
+            .serve(|h, body| {
+                (
+                    TestHeader {
+                        chunk: h.chunk * 10,
+                        n: body.len() as u32,
+                    },
+                    body.to_vec(),
+                )
+            })
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let (header, body) = call.join().unwrap().unwrap();
+    assert_eq!(header, TestHeader { chunk: 40, n: 1 });
+    assert_eq!(body, vec![9]);
+    assert!(served >= 1);
+}

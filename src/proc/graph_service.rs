@@ -30,6 +30,7 @@ use crate::run::RunContext;
 const IDLE_WAIT: Duration = Duration::from_millis(100);
 
 pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
+    let started = Instant::now();
     let config = &ctx.config;
     let task = task_info(config)?;
     let (dims, layout) = (task.dims, task.layout);
@@ -67,6 +68,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let stop = StopWatch::new();
     let mut picture = GraphPicture::new(ctx)?;
     ctx.mark_ready("graph-service")?;
+    let mut first_chunk = FirstChunk::new(&service, started);
     let reason = loop {
         let _ = waitset
             .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, IDLE_WAIT);
@@ -81,6 +83,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             break "stop requested";
         }
         ingest_all(&mut service, &trajectories);
+        first_chunk.check(&service);
         load_new_weights(&mut service, &weights);
         server.serve(|header, body| service.handle(header, body))?;
         if metrics.due() {
@@ -112,6 +115,39 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             "last_checkpoint": checkpoints.last_path, "checkpoint_errors": checkpoints.errors,
         }),
     )
+}
+
+/// Logs when the first trajectory chunk of this incarnation arrives, seconds after the process
+/// started and after it was ready (a crash restart's data gap, see docs/ARCHITECTURE.md).
+struct FirstChunk {
+    started: Instant,
+    ready: Instant,
+    chunks_at_ready: Option<u64>,
+}
+
+impl FirstChunk {
+    fn new(service: &GraphService, started: Instant) -> Self {
+        let chunks_at_ready = Some(service.stats().chunks);
+        Self {
+            started,
+            ready: Instant::now(),
+            chunks_at_ready,
+        }
+    }
+
+    fn check(&mut self, service: &GraphService) {
+        let Some(before) = self.chunks_at_ready else {
+            return;
+        };
+        if service.stats().chunks > before {
+            tracing::info!(
+                secs_since_start = self.started.elapsed().as_secs_f64(),
+                secs_since_ready = self.ready.elapsed().as_secs_f64(),
+                "first trajectory chunk of this graph-service"
+            );
+            self.chunks_at_ready = None;
+        }
+    }
 }
 
 /// Where the service started from, for the log and the status file.
