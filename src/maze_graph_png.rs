@@ -156,3 +156,85 @@ impl MazeGraphPlot {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use graph_service::xy::{XyFrontier, XyNode};
+
+    use super::*;
+
+    /// A lattice of `side × side` nodes over `maze`'s goal box, each joined to its right and
+    /// upper neighbour, with a frontier route along the first row.
+    fn lattice(maze: &Maze, side: u32) -> XyGraph {
+        let area = maze.goal_box();
+        let at = |i: u32, j: u32| {
+            let t = |k: u32| (k as f32 + 0.5) / side as f32;
+            [
+                area.low[0] + t(i) * area.width(),
+                area.low[1] + t(j) * area.height(),
+            ]
+        };
+        let id = |i: u32, j: u32| j * side + i;
+        let nodes = (0..side * side)
+            .map(|n| XyNode {
+                xy: Some(at(n % side, n / side)),
+                n_states: 1,
+                visits: u64::from(n),
+            })
+            .collect();
+        let mut edges = Vec::new();
+        for (i, j) in (0..side).flat_map(|j| (0..side).map(move |i| (i, j))) {
+            if i + 1 < side {
+                edges.push((id(i, j), id(i + 1, j)));
+            }
+            if j + 1 < side {
+                edges.push((id(i, j), id(i, j + 1)));
+            }
+        }
+        let route: Vec<[f32; 2]> = (0..side).map(|i| at(i, 0)).collect();
+        let frontier = Some(XyFrontier {
+            frontier: route.last().copied(),
+            route,
+        });
+        XyGraph {
+            graph_version: 1,
+            nodes,
+            edges,
+            frontier,
+        }
+    }
+
+    #[test]
+    fn a_five_thousand_node_graph_is_drawn_into_a_png_that_decodes() {
+        let maze = Maze::new(envs::MazeLayout::U);
+        let mut coverage = Coverage::new(&maze);
+        coverage.visit(maze.cell_center(maze.robot_cell()));
+        let graph = lattice(&maze, 71);
+        assert!(graph.nodes.len() > 5_000);
+        let path = std::env::temp_dir().join(format!("asi-maze-graph-{}.png", std::process::id()));
+        let clock = std::time::Instant::now();
+        render(&maze, &coverage, &graph, &path).unwrap();
+        eprintln!(
+            "{} nodes drawn in {:.3} s",
+            graph.nodes.len(),
+            clock.elapsed().as_secs_f64()
+        );
+        let file = std::fs::File::open(&path).unwrap();
+        let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+            .read_info()
+            .unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size()];
+        let info = reader.next_frame(&mut pixels).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(
+            (info.width, info.height),
+            PixelMap::new(maze.world_bounds()).size()
+        );
+        // The route colour is in the picture (RGB rows, no alpha).
+        let red = [ROUTE_COLOR.0, ROUTE_COLOR.1, ROUTE_COLOR.2];
+        assert!(
+            pixels.chunks_exact(3).any(|p| p == red),
+            "the frontier route is drawn"
+        );
+    }
+}
