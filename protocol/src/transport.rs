@@ -603,6 +603,9 @@ where
 /// How often a waiting [`RpcClient::call`] checks that a server still holds its request.
 pub const SERVER_CHECK_INTERVAL: Duration = Duration::from_millis(100);
 
+/// A sent request awaiting its response.
+type Pending<Q, R> = iceoryx2::pending_response::PendingResponse<Ipc, [u8], Q, [u8], R>;
+
 /// The asking side of a request–response channel.
 pub struct RpcClient<Q, R>
 where
@@ -698,12 +701,7 @@ where
     }
 
     /// Loans, writes, sends and notifies one request.
-    fn send_request(
-        &self,
-        header: Q,
-        body: &[u8],
-    ) -> Result<iceoryx2::pending_response::PendingResponse<Ipc, [u8], Q, [u8], R>, TransportError>
-    {
+    fn send_request(&self, header: Q, body: &[u8]) -> Result<Pending<Q, R>, TransportError> {
         let send_err = |e: &dyn Debug| TransportError::Send {
             service: self.name.clone(),
             reason: format!("{e:?}"),
