@@ -31,6 +31,10 @@ const PARAMS: DeterministicParams = DeterministicParams {
 };
 
 fn level(params: DeterministicParams) -> DeterministicLevel {
+    level_with(params, &[16, 16])
+}
+
+fn level_with(params: DeterministicParams, hidden: &[usize]) -> DeterministicLevel {
     let cpu = Device::Cpu;
     let (online, target) = (VarMap::new(), VarMap::new());
     let build = |vm: &VarMap, seed| {
@@ -38,7 +42,7 @@ fn level(params: DeterministicParams) -> DeterministicLevel {
         let actor = DeterministicActor::new(
             &vb.pp("actor"),
             HEAD + 2,
-            &[16, 16],
+            hidden,
             1,
             ACTION_SCALE,
             LinearInit::TorchDefault,
@@ -47,7 +51,7 @@ fn level(params: DeterministicParams) -> DeterministicLevel {
         let critic = DistanceCritic::new(
             &vb.pp("critic"),
             HEAD + 1 + 2,
-            &[16, 16],
+            hidden,
             LinearInit::TorchDefault,
         )
         .unwrap();
@@ -310,5 +314,242 @@ fn the_learning_rates_halve_every_decay_period() {
             "{episodes}: {}",
             l.learning_rate()
         );
+    }
+}
+
+// Reference: learner/tests/reference/deterministic_update.py (numpy, float64, hand-written
+// backprop; run with any python that has numpy): two updates on tiny networks (hidden [3]) with
+// formula weights, clipping at 0.01 (both networks, every update), Adam lr 1e-3, critic weight
+// decay 1e-5, targets moved after update 0 only. Update 1 runs on a stretched batch (gradients
+// of another size), so that clipping shows through Adam: without it the online parameters
+// differ by up to 8e-5 (`--no-clip`), 40 × the tolerance.
+/// Per update: actor loss, critic loss, actor and critic gradient norms, mean Q, mean y.
+const WANT_STATS: [[f64; 6]; 2] = [
+    // update 0
+    [
+        -0.47467673248759956,
+        0.21881022453912116,
+        0.08252309478693484,
+        1.0629663859421423,
+        0.41717781438537177,
+        -0.026858118518266225,
+    ],
+    // update 1
+    [
+        -0.482171258579485,
+        0.821262339803137,
+        0.15689430123214887,
+        2.2318530472437796,
+        0.4246235617281579,
+        -0.44409328983070884,
+    ],
+];
+/// Online parameters after the two updates, in `vars_under` order.
+const WANT_ONLINE: [&[f64]; 8] = [
+    // actor.l0.bias
+    &[
+        0.0007441254744793037,
+        0.3834223930522253,
+        0.20545642170242978,
+    ],
+    // actor.l0.weight
+    &[
+        0.2584312060440563,
+        0.3644630999877428,
+        -0.06309827765729929,
+        -0.3967322759789065,
+        -0.1495506659320944,
+        0.3178052971062204,
+        0.31743557209582735,
+        -0.1465916517007707,
+        -0.3998219163962476,
+        -0.06624167017932377,
+        0.36163776499855554,
+        0.2593710057709158,
+        -0.22322090851471177,
+        -0.3802819261934055,
+        0.020169075122724492,
+    ],
+    // actor.l1.bias
+    &[0.3961682495331649],
+    // actor.l1.weight
+    &[
+        0.34602787757682457,
+        -0.10035911982917582,
+        -0.39922517036381566,
+    ],
+    // critic.l0.bias
+    &[
+        0.13201368929475765,
+        -0.3270369518224189,
+        -0.30712119953946604,
+    ],
+    // critic.l0.weight
+    &[
+        -0.13840343460736226,
+        -0.40042174913298556,
+        -0.07089254221856335,
+        0.35748734201148497,
+        0.26320610473753187,
+        -0.21561772514013713,
+        -0.37985212997851553,
+        0.011592226479330314,
+        0.38680820224610546,
+        0.1928052806384654,
+        -0.2844435402539123,
+        -0.3448867008650299,
+        0.10097035583392427,
+        0.40190149277429554,
+        0.11283859897868764,
+        -0.34047244197251497,
+        -0.29392684470057334,
+        0.17818743913833782,
+    ],
+    // critic.l1.bias
+    &[-0.34663278667514125],
+    // critic.l1.weight
+    &[-0.3909809661293752, -0.0315204003676252, 0.3771481443468857],
+];
+/// Target parameters after the two updates, in `vars_under` order.
+const WANT_TARGET: [&[f64]; 8] = [
+    // actor.l0.bias
+    &[
+        -0.37973401276660285,
+        0.01050253752928137,
+        0.3853581956117545,
+    ],
+    // actor.l0.weight
+    &[
+        -0.21549460411971372,
+        0.2638038827999432,
+        0.3566290633909192,
+        -0.0730081693788345,
+        -0.39568826296864645,
+        -0.13867412626814363,
+        0.3214825817565484,
+        0.31068190216361796,
+        -0.15528849136187348,
+        -0.393755531368164,
+        -0.055379795253188875,
+        0.36412747064876905,
+        0.2501871389903475,
+        -0.2302779374150598,
+        -0.37338529602357673,
+    ],
+    // actor.l1.bias
+    &[0.05010528403070276],
+    // actor.l1.weight
+    &[0.2921245773564424, 0.337409003021641, -0.11161690108898963],
+    // critic.l0.bias
+    &[
+        0.3967531174072254,
+        0.12309981258714674,
+        -0.33090033985645906,
+    ],
+    // critic.l0.weight
+    &[
+        0.3148077635530722,
+        -0.1491203934215222,
+        -0.394561610327981,
+        -0.06199442098821513,
+        0.36139995491271865,
+        0.25534785451477365,
+        -0.22479480256560466,
+        -0.37561723690775894,
+        0.02384544003106131,
+        0.38836057092647647,
+        0.18393186885580698,
+        -0.28996276085693573,
+        -0.3390466365004774,
+        0.1085882259690924,
+        0.3971358191167743,
+        0.10388381071089382,
+        -0.34155278767637665,
+        -0.2866390464893333,
+    ],
+    // critic.l1.bias
+    &[0.08478810288219546],
+    // critic.l1.weight
+    &[
+        -0.18510402441616697,
+        -0.38807703044742714,
+        -0.022501471597606126,
+    ],
+];
+
+/// [`batch`] with the obs columns of head and next head × 4 and rewards × 10.
+fn stretched() -> SacBatch {
+    let b = batch();
+    let stretch = mat(&[4.0, 1.0, 1.0], 3);
+    SacBatch {
+        head: b.head.broadcast_mul(&stretch).unwrap(),
+        next_head: b.next_head.broadcast_mul(&stretch).unwrap(),
+        reward: b.reward.affine(10.0, 0.0).unwrap(),
+        ..b
+    }
+}
+
+/// Element `k` of parameter `index` (in `vars_under` order): `0.4 sin(1.3 k + 0.7 index + extra)`.
+fn formula(var: &Var, index: usize, extra: f64) {
+    let n = var.elem_count();
+    let values: Vec<f32> = (0..n)
+        .map(|k| (0.4 * (1.3 * k as f64 + 0.7 * index as f64 + extra).sin()) as f32)
+        .collect();
+    let t = Tensor::from_vec(values, var.shape(), &Device::Cpu).unwrap();
+    var.set(&t).unwrap();
+}
+
+#[test]
+fn two_updates_match_a_numpy_reference_of_the_reference_code_update() {
+    let params = DeterministicParams {
+        grad_clip: 0.01,
+        ..PARAMS
+    };
+    let mut l = level_with(params, &[3]);
+    let n = l.nets();
+    let online: Vec<Var> = n.actor_vars.iter().chain(&n.critic_vars).cloned().collect();
+    let target: Vec<Var> = n
+        .actor_target_vars
+        .iter()
+        .chain(&n.critic_target_vars)
+        .cloned()
+        .collect();
+    assert_eq!((online.len(), target.len()), (8, 8));
+    for (i, (o, t)) in online.iter().zip(&target).enumerate() {
+        formula(o, i, 0.0);
+        formula(t, i, 5.0);
+    }
+    for (k, want) in WANT_STATS.iter().enumerate() {
+        let s = l.update(&[batch(), stretched()][k], k as u64).unwrap();
+        let got = [
+            s.actor_loss,
+            s.critic.loss,
+            s.actor_grad_norm,
+            s.critic_grad_norm,
+            s.critic.q_mean,
+            s.critic.target_mean,
+        ];
+        for (j, (g, w)) in got.iter().zip(want).enumerate() {
+            assert!(
+                (g - w).abs() < 1e-5 * (1.0 + w.abs()),
+                "update {k} stat {j}: {g} vs {w}"
+            );
+        }
+        assert_eq!(s.n_kept, 3);
+    }
+    for (what, vars, want) in [
+        ("online", &online, WANT_ONLINE),
+        ("target", &target, WANT_TARGET),
+    ] {
+        for (i, (var, want)) in vars.iter().zip(want).enumerate() {
+            let got: Vec<f32> = var.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
+            assert_eq!(got.len(), want.len());
+            for (e, (g, w)) in got.iter().zip(want.iter()).enumerate() {
+                assert!(
+                    (f64::from(*g) - w).abs() < 2e-6,
+                    "{what} param {i}[{e}]: {g} vs {w}"
+                );
+            }
+        }
     }
 }
