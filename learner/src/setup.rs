@@ -44,8 +44,10 @@ pub struct Networks {
     pub low: LowLevel,
 }
 
-/// The low level of either algorithm.
+/// The low level of either algorithm. One value per learner, never moved in a hot path, so
+/// the size difference of the variants is harmless.
 #[derive(Debug)]
+#[allow(clippy::large_enum_variant)]
 pub enum LowLevel {
     /// SAC, as the high level.
     Sac(SacLevel),

@@ -165,7 +165,7 @@ impl DeterministicLevel {
             (stats.actor_loss, stats.actor_grad_norm) = self.actor_step(&kept)?;
             (stats.critic, stats.critic_grad_norm) = self.critic_step(&kept, &target)?;
         }
-        if update_index % self.params.target_update_period.max(1) == 0 {
+        if update_index.is_multiple_of(self.params.target_update_period.max(1)) {
             self.polyak()?;
             stats.targets_moved = true;
         }
