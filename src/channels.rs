@@ -4,10 +4,13 @@
 use iceoryx2::prelude::*;
 use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
 use protocol::transport::{
-    Backpressure, ChannelShape, Ipc, RpcClient, RpcServer, SlicePublisher, SliceSubscriber, TransportError,
-    ValuePublisher, ValueSubscriber,
+    Backpressure, ChannelShape, Ipc, RpcClient, RpcServer, SlicePublisher, SliceSubscriber,
+    TransportError, ValuePublisher, ValueSubscriber,
 };
-use protocol::{Config, ControlMessage, MetricsSample, ProgressMessage, RunId, Service, StepLayout, TrajectoryHeader, WeightsHeader};
+use protocol::{
+    Config, ControlMessage, MetricsSample, ProgressMessage, RunId, Service, StepLayout,
+    TrajectoryHeader, WeightsHeader,
+};
 
 /// Trajectory chunks buffered per subscriber. The throttle keeps the learner at most
 /// `replay_slack_steps` (plus one chunk per actor) behind, so this bound is generous; a full
@@ -57,53 +60,116 @@ impl Channels {
         }
     }
 
-    pub fn trajectory_publisher(&self, node: &Node<Ipc>) -> Result<TrajectoryPublisher, TransportError> {
+    pub fn trajectory_publisher(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<TrajectoryPublisher, TransportError> {
         let shape = self.shape(self.chunk_floats, TRAJECTORY_BUFFER, 0);
-        SlicePublisher::open(node, &self.name(Service::Trajectories), &shape, Backpressure::Discard)
+        SlicePublisher::open(
+            node,
+            &self.name(Service::Trajectories),
+            &shape,
+            Backpressure::Discard,
+        )
     }
 
-    pub fn trajectory_subscriber(&self, node: &Node<Ipc>) -> Result<TrajectorySubscriber, TransportError> {
-        SliceSubscriber::open(node, &self.name(Service::Trajectories), &self.shape(self.chunk_floats, TRAJECTORY_BUFFER, 0))
+    pub fn trajectory_subscriber(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<TrajectorySubscriber, TransportError> {
+        SliceSubscriber::open(
+            node,
+            &self.name(Service::Trajectories),
+            &self.shape(self.chunk_floats, TRAJECTORY_BUFFER, 0),
+        )
     }
 
     /// `max_bytes`: the size of one weights message (known to the learner).
-    pub fn weights_publisher(&self, node: &Node<Ipc>, max_bytes: usize) -> Result<WeightsPublisher, TransportError> {
-        SlicePublisher::open(node, &self.name(Service::Weights), &self.shape(max_bytes, 2, 1), Backpressure::Discard)
+    pub fn weights_publisher(
+        &self,
+        node: &Node<Ipc>,
+        max_bytes: usize,
+    ) -> Result<WeightsPublisher, TransportError> {
+        SlicePublisher::open(
+            node,
+            &self.name(Service::Weights),
+            &self.shape(max_bytes, 2, 1),
+            Backpressure::Discard,
+        )
     }
 
-    pub fn weights_subscriber(&self, node: &Node<Ipc>) -> Result<WeightsSubscriber, TransportError> {
+    pub fn weights_subscriber(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<WeightsSubscriber, TransportError> {
         SliceSubscriber::open(node, &self.name(Service::Weights), &self.shape(0, 2, 1))
     }
 
-    pub fn progress_publisher(&self, node: &Node<Ipc>) -> Result<ValuePublisher<ProgressMessage>, TransportError> {
+    pub fn progress_publisher(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<ValuePublisher<ProgressMessage>, TransportError> {
         ValuePublisher::open(node, &self.name(Service::Progress), &self.shape(0, 4, 1))
     }
 
-    pub fn progress_subscriber(&self, node: &Node<Ipc>) -> Result<ValueSubscriber<ProgressMessage>, TransportError> {
+    pub fn progress_subscriber(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<ValueSubscriber<ProgressMessage>, TransportError> {
         ValueSubscriber::open(node, &self.name(Service::Progress), &self.shape(0, 4, 1))
     }
 
-    pub fn metrics_publisher(&self, node: &Node<Ipc>) -> Result<ValuePublisher<MetricsSample>, TransportError> {
-        ValuePublisher::open(node, &self.name(Service::Metrics), &self.shape(0, METRICS_BUFFER, 0))
+    pub fn metrics_publisher(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<ValuePublisher<MetricsSample>, TransportError> {
+        ValuePublisher::open(
+            node,
+            &self.name(Service::Metrics),
+            &self.shape(0, METRICS_BUFFER, 0),
+        )
     }
 
-    pub fn metrics_subscriber(&self, node: &Node<Ipc>) -> Result<ValueSubscriber<MetricsSample>, TransportError> {
-        ValueSubscriber::open(node, &self.name(Service::Metrics), &self.shape(0, METRICS_BUFFER, 0))
+    pub fn metrics_subscriber(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<ValueSubscriber<MetricsSample>, TransportError> {
+        ValueSubscriber::open(
+            node,
+            &self.name(Service::Metrics),
+            &self.shape(0, METRICS_BUFFER, 0),
+        )
     }
 
-    pub fn control_publisher(&self, node: &Node<Ipc>) -> Result<ValuePublisher<ControlMessage>, TransportError> {
+    pub fn control_publisher(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<ValuePublisher<ControlMessage>, TransportError> {
         ValuePublisher::open(node, &self.name(Service::Control), &self.shape(0, 16, 1))
     }
 
-    pub fn control_subscriber(&self, node: &Node<Ipc>) -> Result<ValueSubscriber<ControlMessage>, TransportError> {
+    pub fn control_subscriber(
+        &self,
+        node: &Node<Ipc>,
+    ) -> Result<ValueSubscriber<ControlMessage>, TransportError> {
         ValueSubscriber::open(node, &self.name(Service::Control), &self.shape(0, 16, 1))
     }
 
     pub fn graph_server(&self, node: &Node<Ipc>) -> Result<GraphServer, TransportError> {
-        RpcServer::open(node, &self.name(Service::Graph), self.max_actors + EXTRA_PORTS, GRAPH_MAX_BYTES)
+        RpcServer::open(
+            node,
+            &self.name(Service::Graph),
+            self.max_actors + EXTRA_PORTS,
+            GRAPH_MAX_BYTES,
+        )
     }
 
     pub fn graph_client(&self, node: &Node<Ipc>) -> Result<GraphClient, TransportError> {
-        RpcClient::open(node, &self.name(Service::Graph), self.max_actors + EXTRA_PORTS, GRAPH_MAX_BYTES)
+        RpcClient::open(
+            node,
+            &self.name(Service::Graph),
+            self.max_actors + EXTRA_PORTS,
+            GRAPH_MAX_BYTES,
+        )
     }
 }

@@ -44,11 +44,17 @@ impl PixelMap {
         }
         let longest = (high[0] - low[0]).max(high[1] - low[1]).max(cell);
         let px_per_unit = (f64::from(IMAGE_SIDE_PX) - 2.0 * MARGIN_PX) / longest;
-        Self { low, high, px_per_unit }
+        Self {
+            low,
+            high,
+            px_per_unit,
+        }
     }
 
     fn size(&self) -> (u32, u32) {
-        let side = |axis: usize| ((self.high[axis] - self.low[axis]) * self.px_per_unit + 2.0 * MARGIN_PX).round() as u32;
+        let side = |axis: usize| {
+            ((self.high[axis] - self.low[axis]) * self.px_per_unit + 2.0 * MARGIN_PX).round() as u32
+        };
         (side(0).max(1), side(1).max(1))
     }
 
@@ -64,7 +70,12 @@ impl PixelMap {
 }
 
 /// Draws `dump` (with the frontier route from `start`, if any) into a PNG at `path`.
-pub fn render(dump: &GraphDump, start: Option<LatentPoint>, found: Option<&FrontierRoute>, path: &Path) -> anyhow::Result<()> {
+pub fn render(
+    dump: &GraphDump,
+    start: Option<LatentPoint>,
+    found: Option<&FrontierRoute>,
+    path: &Path,
+) -> anyhow::Result<()> {
     let cell = f64::from(dump.cell_size);
     let mut points: Vec<LatentPoint> = dump.nodes.iter().map(|n| corner(n.key, cell)).collect();
     points.extend(start);
@@ -74,11 +85,14 @@ pub fn render(dump: &GraphDump, start: Option<LatentPoint>, found: Option<&Front
     root.fill(&WHITE).map_err(|e| fail(&e))?;
     draw_graph(&root, &map, dump).map_err(|e| fail(&e))?;
     draw_route(&root, &map, cell, start, found).map_err(|e| fail(&e))?;
-    root.present().map_err(|e| fail(&e)).with_context(|| format!("writing {}", path.display()))
+    root.present()
+        .map_err(|e| fail(&e))
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
-type DrawResult<'a> = Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
+type DrawResult<'a> =
+    Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
 
 fn draw_graph<'a>(root: &Area<'a>, map: &PixelMap, dump: &GraphDump) -> DrawResult<'a> {
     let cell = f64::from(dump.cell_size);
@@ -92,8 +106,14 @@ fn draw_graph<'a>(root: &Area<'a>, map: &PixelMap, dump: &GraphDump) -> DrawResu
     for node in &dump.nodes {
         let [x, y] = corner(node.key, cell).map(f64::from);
         // Inset by a tenth so neighbouring cells stay apart.
-        let corners = [map.px([x + 0.1 * cell, y + 0.9 * cell]), map.px([x + 0.9 * cell, y + 0.1 * cell])];
-        root.draw(&Rectangle::new(corners, visit_color(node.visits, most).filled()))?;
+        let corners = [
+            map.px([x + 0.1 * cell, y + 0.9 * cell]),
+            map.px([x + 0.9 * cell, y + 0.1 * cell]),
+        ];
+        root.draw(&Rectangle::new(
+            corners,
+            visit_color(node.visits, most).filled(),
+        ))?;
     }
     Ok(())
 }
@@ -110,7 +130,11 @@ fn draw_route<'a>(
     if let Some(found) = found {
         let line: Vec<(i32, i32)> = found.route.iter().map(|&p| at_centre(p)).collect();
         root.draw(&PathElement::new(line, ROUTE_COLOR.stroke_width(3)))?;
-        root.draw(&Circle::new(at_centre(found.frontier), 8, ROUTE_COLOR.stroke_width(3)))?;
+        root.draw(&Circle::new(
+            at_centre(found.frontier),
+            8,
+            ROUTE_COLOR.stroke_width(3),
+        ))?;
     }
     if let Some(start) = start {
         root.draw(&Circle::new(map.px_of(start), 6, START_COLOR.filled()))?;
@@ -135,7 +159,12 @@ fn key_of(p: LatentPoint, cell: f64) -> [i32; 2] {
 
 /// Colour of a node with `visits`, on a log scale up to `most`.
 pub(crate) fn visit_color(visits: u64, most: u64) -> RGBColor {
-    let t = if most == 0 { 0.0 } else { (1.0 + visits as f64).ln() / (1.0 + most as f64).ln() };
-    let mix = |axis: usize| (FEW_VISITS[axis] + t * (MANY_VISITS[axis] - FEW_VISITS[axis])).round() as u8;
+    let t = if most == 0 {
+        0.0
+    } else {
+        (1.0 + visits as f64).ln() / (1.0 + most as f64).ln()
+    };
+    let mix =
+        |axis: usize| (FEW_VISITS[axis] + t * (MANY_VISITS[axis] - FEW_VISITS[axis])).round() as u8;
     RGBColor(mix(0), mix(1), mix(2))
 }

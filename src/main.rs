@@ -43,7 +43,10 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command.unwrap_or_else(|| Command::Train(cli::TrainArgs::default())) {
+    match cli
+        .command
+        .unwrap_or_else(|| Command::Train(cli::TrainArgs::default()))
+    {
         Command::Train(args) => {
             let ctx = launcher::prepare(&args)?;
             if args.serial {
@@ -52,12 +55,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 launcher::run(ctx)
             }
         }
-        Command::Learner(args) => proc::learner::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
-        Command::GraphService(args) => proc::graph_service::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
-        Command::Evaluator(args) => proc::evaluator::run(&run::RunContext::open(&args.run_dir, &args.run_id)?),
+        Command::Learner(args) => {
+            proc::learner::run(&run::RunContext::open(&args.run_dir, &args.run_id)?)
+        }
+        Command::GraphService(args) => {
+            proc::graph_service::run(&run::RunContext::open(&args.run_dir, &args.run_id)?)
+        }
+        Command::Evaluator(args) => {
+            proc::evaluator::run(&run::RunContext::open(&args.run_dir, &args.run_id)?)
+        }
         Command::Actor(args) => {
             let ctx = run::RunContext::open(&args.child.run_dir, &args.child.run_id)?;
-            proc::actor::run(&ctx, &proc::actor::ActorArgs { actor_id: args.actor_id, incarnation: args.incarnation })
+            proc::actor::run(
+                &ctx,
+                &proc::actor::ActorArgs {
+                    actor_id: args.actor_id,
+                    incarnation: args.incarnation,
+                },
+            )
         }
         Command::Bench(args) => bench::run(args),
         Command::Graph(args) => graph_tool::run(&args),
@@ -76,5 +91,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 fn init_tracing() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
 }

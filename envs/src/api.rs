@@ -71,7 +71,11 @@ pub struct Step {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum EnvError {
     #[error("action has {got} values, the task `{task}` expects {expected}")]
-    ActionLength { task: String, expected: usize, got: usize },
+    ActionLength {
+        task: String,
+        expected: usize,
+        got: usize,
+    },
     #[error("action value {index} is {value}, but actions must be finite")]
     NonFiniteAction { index: usize, value: f32 },
     #[error("step called before reset (or after the episode ended) on `{task}`")]
@@ -81,7 +85,11 @@ pub enum EnvError {
     #[error("goal ({x}, {y}) is not usable: {reason}")]
     InvalidGoal { x: f32, y: f32, reason: String },
     #[error("invalid environment parameter `{field}` = {value}: {reason}")]
-    InvalidParam { field: String, value: String, reason: String },
+    InvalidParam {
+        field: String,
+        value: String,
+        reason: String,
+    },
 }
 
 /// A goal-conditioned environment.
@@ -114,7 +122,10 @@ pub fn validate_action(spec: &EnvSpec, action: &[f32]) -> Result<(), EnvError> {
         });
     }
     match action.iter().position(|a| !a.is_finite()) {
-        Some(index) => Err(EnvError::NonFiniteAction { index, value: action[index] }),
+        Some(index) => Err(EnvError::NonFiniteAction {
+            index,
+            value: action[index],
+        }),
         None => Ok(()),
     }
 }

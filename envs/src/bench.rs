@@ -29,7 +29,10 @@ pub struct BenchReport {
 /// Times `steps` random control steps of `task`, `repeats` times.
 pub fn run(task: &str, steps: usize, repeats: usize, seed: u64) -> Result<BenchReport, EnvError> {
     let mut env = registry::make(task)?;
-    let (low, high) = (env.spec().action_low.clone(), env.spec().action_high.clone());
+    let (low, high) = (
+        env.spec().action_low.clone(),
+        env.spec().action_high.clone(),
+    );
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
     let actions: Vec<f32> = (0..steps * low.len())
         .map(|i| {
@@ -52,7 +55,13 @@ pub fn run(task: &str, steps: usize, repeats: usize, seed: u64) -> Result<BenchR
         per_repeat.push(steps as f64 / start.elapsed().as_secs_f64().max(f64::MIN_POSITIVE));
     }
     let median = median(&per_repeat);
-    Ok(BenchReport { task: task.to_owned(), steps, per_repeat, median, n_physics_failures: env.n_physics_failures() })
+    Ok(BenchReport {
+        task: task.to_owned(),
+        steps,
+        per_repeat,
+        median,
+        n_physics_failures: env.n_physics_failures(),
+    })
 }
 
 /// Median of a non-empty slice (mean of the two middle values for even lengths); 0 if empty.
@@ -87,6 +96,9 @@ mod tests {
 
     #[test]
     fn an_unknown_task_is_an_error() {
-        assert!(matches!(run("no-such-task", 10, 1, 0), Err(EnvError::UnknownTask { .. })));
+        assert!(matches!(
+            run("no-such-task", 10, 1, 0),
+            Err(EnvError::UnknownTask { .. })
+        ));
     }
 }

@@ -116,7 +116,10 @@ pub struct EnvOptions {
 pub fn make_with(name: &str, options: EnvOptions) -> Result<Box<dyn Env>, EnvError> {
     match parse_task(name)? {
         Task::Maze(id) => {
-            let task = MazeTaskParams { max_steps: options.max_steps, ..MazeTaskParams::default() };
+            let task = MazeTaskParams {
+                max_steps: options.max_steps,
+                ..MazeTaskParams::default()
+            };
             make_maze(id, &MazeRobotParams::default(), task)
         }
         Task::HalfCheetahHurdle(variant) => {
@@ -124,7 +127,10 @@ pub fn make_with(name: &str, options: EnvOptions) -> Result<Box<dyn Env>, EnvErr
             if let Some(max_steps) = options.max_steps {
                 params.max_steps = max_steps;
             }
-            Ok(Box::new(CheetahHurdle::new(params, variant == Variant::Test)?))
+            Ok(Box::new(CheetahHurdle::new(
+                params,
+                variant == Variant::Test,
+            )?))
         }
     }
 }

@@ -5,7 +5,9 @@ use std::collections::HashSet;
 use envs::api::EnvError;
 use envs::maze::MazeLayout;
 use envs::maze_env::Variant;
-use envs::registry::{make, make_with, parse_task, task_name, task_names, EnvOptions, RobotKind, Task, TaskId, TASKS};
+use envs::registry::{
+    make, make_with, parse_task, task_name, task_names, EnvOptions, RobotKind, Task, TaskId, TASKS,
+};
 
 #[test]
 fn every_maze_task_is_registered_once_for_both_robots_and_variants() {
@@ -142,7 +144,10 @@ fn ant_maze_tasks_have_the_ants_dimensions_and_step() {
 
 #[test]
 fn the_half_cheetah_is_registered_with_a_test_variant_that_stops_on_success() {
-    assert_eq!(parse_task("halfcheetah-hurdle").unwrap(), Task::HalfCheetahHurdle(Variant::Train));
+    assert_eq!(
+        parse_task("halfcheetah-hurdle").unwrap(),
+        Task::HalfCheetahHurdle(Variant::Train)
+    );
     let train = make("halfcheetah-hurdle").unwrap();
     let test = make("halfcheetah-hurdle-test").unwrap();
     assert_eq!(train.spec().obs_dim, 18);
@@ -157,7 +162,9 @@ fn an_episode_length_override_truncates_every_task_kind() {
         assert_eq!(env.spec().max_steps, 3);
         env.reset(1);
         let action = vec![0.0; env.spec().action_dim];
-        let truncated: Vec<bool> = (0..3).map(|_| env.step(&action).unwrap().truncated).collect();
+        let truncated: Vec<bool> = (0..3)
+            .map(|_| env.step(&action).unwrap().truncated)
+            .collect();
         assert_eq!(truncated, vec![false, false, true], "{name}");
     }
 }

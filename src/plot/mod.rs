@@ -48,16 +48,22 @@ pub struct Band {
 /// repeated x; non-finite values are skipped.
 pub fn read_series(run_dir: &Path, x_key: &str, metric: &str) -> anyhow::Result<Series> {
     let path = run_dir.join("metrics.jsonl");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let mut series = Series { x: Vec::new(), y: Vec::new() };
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut series = Series {
+        x: Vec::new(),
+        y: Vec::new(),
+    };
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        let value: serde_json::Value =
-            serde_json::from_str(line).with_context(|| format!("{}: line {} is not JSON", path.display(), i + 1))?;
-        let (Some(x), Some(y)) = (value.get(x_key).and_then(|v| v.as_f64()), value.get(metric).and_then(|v| v.as_f64()))
-        else {
+        let value: serde_json::Value = serde_json::from_str(line)
+            .with_context(|| format!("{}: line {} is not JSON", path.display(), i + 1))?;
+        let (Some(x), Some(y)) = (
+            value.get(x_key).and_then(|v| v.as_f64()),
+            value.get(metric).and_then(|v| v.as_f64()),
+        ) else {
             continue;
         };
         if !(x.is_finite() && y.is_finite()) {
@@ -77,7 +83,10 @@ pub fn read_series(run_dir: &Path, x_key: &str, metric: &str) -> anyhow::Result<
 
 /// The arm of a run directory: its name without a trailing seed tag.
 pub fn arm_name(run_dir: &Path) -> String {
-    let name = run_dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| run_dir.display().to_string());
+    let name = run_dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| run_dir.display().to_string());
     let digits = name.len() - name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
     if digits == 0 {
         return name;
@@ -110,8 +119,9 @@ fn interpolate(s: &Series, x: f64) -> Option<f64> {
 /// Two-sided 95 % Student t quantile for `df` degrees of freedom.
 pub fn t_975(df: usize) -> f64 {
     const TABLE: [f64; 30] = [
-        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
-        2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+        2.052, 2.048, 2.045, 2.042,
     ];
     match df {
         0 => f64::NAN,
@@ -123,16 +133,31 @@ pub fn t_975(df: usize) -> f64 {
 /// Mean and 95 % band of the seeds' curves on a common grid (see the module doc).
 pub fn aggregate(seeds: &[Series]) -> Option<Band> {
     let seeds: Vec<&Series> = seeds.iter().filter(|s| !s.x.is_empty()).collect();
-    let start = seeds.iter().map(|s| s.x[0]).fold(f64::NEG_INFINITY, f64::max);
-    let end = seeds.iter().map(|s| *s.x.last().expect("non-empty")).fold(f64::INFINITY, f64::min);
+    let start = seeds
+        .iter()
+        .map(|s| s.x[0])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let end = seeds
+        .iter()
+        .map(|s| *s.x.last().expect("non-empty"))
+        .fold(f64::INFINITY, f64::min);
     if seeds.is_empty() || end < start {
         return None;
     }
     let n = seeds.len();
     let steps = if end > start { GRID_POINTS } else { 1 };
-    let mut band = Band { x: Vec::new(), mean: Vec::new(), half_width: Vec::new(), n_seeds: n };
+    let mut band = Band {
+        x: Vec::new(),
+        mean: Vec::new(),
+        half_width: Vec::new(),
+        n_seeds: n,
+    };
     for k in 0..steps {
-        let x = if steps == 1 { start } else { start + (end - start) * k as f64 / (steps - 1) as f64 };
+        let x = if steps == 1 {
+            start
+        } else {
+            start + (end - start) * k as f64 / (steps - 1) as f64
+        };
         let ys: Vec<f64> = seeds.iter().filter_map(|s| interpolate(s, x)).collect();
         let mean = ys.iter().sum::<f64>() / ys.len() as f64;
         let half = if ys.len() > 1 {
@@ -157,7 +182,11 @@ pub struct Figure {
 }
 
 /// Reads every run and aggregates it per arm and metric.
-pub fn build_figure(run_dirs: &[PathBuf], x_key: &str, metrics: &[String]) -> anyhow::Result<Figure> {
+pub fn build_figure(
+    run_dirs: &[PathBuf],
+    x_key: &str,
+    metrics: &[String],
+) -> anyhow::Result<Figure> {
     if run_dirs.is_empty() {
         bail!("no run directories given");
     }
@@ -174,12 +203,19 @@ pub fn build_figure(run_dirs: &[PathBuf], x_key: &str, metrics: &[String]) -> an
     for arm in order {
         let mut bands = Vec::new();
         for metric in metrics {
-            let series = by_arm[&arm].iter().map(|d| read_series(d, x_key, metric)).collect::<anyhow::Result<Vec<_>>>()?;
+            let series = by_arm[&arm]
+                .iter()
+                .map(|d| read_series(d, x_key, metric))
+                .collect::<anyhow::Result<Vec<_>>>()?;
             bands.push(aggregate(&series));
         }
         arms.push((arm, bands));
     }
-    Ok(Figure { metrics: metrics.to_vec(), x_key: x_key.to_owned(), arms })
+    Ok(Figure {
+        metrics: metrics.to_vec(),
+        x_key: x_key.to_owned(),
+        arms,
+    })
 }
 
 const PANEL_W: u32 = 900;
@@ -206,7 +242,11 @@ pub fn ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
     }
     let raw = (hi - lo) / n.max(1) as f64;
     let mag = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * mag).find(|s| *s >= raw).unwrap_or(10.0 * mag);
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
     let first = (lo / step).ceil() as i64;
     let last = (hi / step).floor() as i64;
     (first..=last).map(|k| k as f64 * step).collect()
@@ -215,7 +255,13 @@ pub fn ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
 /// A short label: 1500000 → "1.5M", 0.25 → "0.25".
 pub fn format_tick(v: f64) -> String {
     let a = v.abs();
-    let (scaled, suffix) = if a >= 1e6 { (v / 1e6, "M") } else if a >= 1e3 { (v / 1e3, "K") } else { (v, "") };
+    let (scaled, suffix) = if a >= 1e6 {
+        (v / 1e6, "M")
+    } else if a >= 1e3 {
+        (v / 1e3, "K")
+    } else {
+        (v, "")
+    };
     let text = format!("{scaled:.2}");
     let text = text.trim_end_matches('0').trim_end_matches('.');
     format!("{}{suffix}", if text == "-0" { "0" } else { text })
@@ -235,9 +281,17 @@ pub fn render_png(figure: &Figure, out: &Path) -> anyhow::Result<()> {
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
-type DrawResult<'a> = Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
+type DrawResult<'a> =
+    Result<(), DrawingAreaErrorKind<<BitMapBackend<'a> as DrawingBackend>::ErrorType>>;
 
-fn text<'a>(root: &Area<'a>, s: &str, x: i32, y: i32, scale: u32, color: &RGBColor) -> DrawResult<'a> {
+fn text<'a>(
+    root: &Area<'a>,
+    s: &str,
+    x: i32,
+    y: i32,
+    scale: u32,
+    color: &RGBColor,
+) -> DrawResult<'a> {
     let mut result = Ok(());
     font::for_each_pixel(s, x, y, scale, |px, py| {
         if result.is_ok() {
@@ -247,20 +301,45 @@ fn text<'a>(root: &Area<'a>, s: &str, x: i32, y: i32, scale: u32, color: &RGBCol
     result
 }
 
-fn draw_panel<'a>(root: &Area<'a>, figure: &Figure, p: usize, metric: &str, top: i32) -> DrawResult<'a> {
-    let bands: Vec<(usize, &Band)> =
-        figure.arms.iter().enumerate().filter_map(|(i, (_, bands))| bands[p].as_ref().map(|b| (i, b))).collect();
+fn draw_panel<'a>(
+    root: &Area<'a>,
+    figure: &Figure,
+    p: usize,
+    metric: &str,
+    top: i32,
+) -> DrawResult<'a> {
+    let bands: Vec<(usize, &Band)> = figure
+        .arms
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (_, bands))| bands[p].as_ref().map(|b| (i, b)))
+        .collect();
     let (left, right) = (MARGIN_L, PANEL_W as i32 - MARGIN_R);
     let (upper, lower) = (top + MARGIN_T, top + PANEL_H as i32 - MARGIN_B);
     text(root, metric, left, top + 12, 2, &TEXT)?;
     if bands.is_empty() {
         return text(root, "no data", left + 20, upper + 40, 2, &TEXT);
     }
-    let x_max = bands.iter().map(|(_, b)| *b.x.last().expect("non-empty")).fold(0.0f64, f64::max).max(1.0);
-    let x_min = bands.iter().map(|(_, b)| b.x[0]).fold(f64::INFINITY, f64::min).min(0.0);
-    let lows = bands.iter().flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m - h));
-    let highs = bands.iter().flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m + h));
-    let (mut y_min, mut y_max) = (lows.fold(f64::INFINITY, f64::min).min(0.0), highs.fold(f64::NEG_INFINITY, f64::max));
+    let x_max = bands
+        .iter()
+        .map(|(_, b)| *b.x.last().expect("non-empty"))
+        .fold(0.0f64, f64::max)
+        .max(1.0);
+    let x_min = bands
+        .iter()
+        .map(|(_, b)| b.x[0])
+        .fold(f64::INFINITY, f64::min)
+        .min(0.0);
+    let lows = bands
+        .iter()
+        .flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m - h));
+    let highs = bands
+        .iter()
+        .flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m + h));
+    let (mut y_min, mut y_max) = (
+        lows.fold(f64::INFINITY, f64::min).min(0.0),
+        highs.fold(f64::NEG_INFINITY, f64::max),
+    );
     if y_max <= y_min {
         y_max = y_min + 1.0;
     }
@@ -269,37 +348,83 @@ fn draw_panel<'a>(root: &Area<'a>, figure: &Figure, p: usize, metric: &str, top:
     if y_min < 0.0 {
         y_min -= pad;
     }
-    let px = |x: f64| left + ((x - x_min) / (x_max - x_min) * f64::from(right - left)).round() as i32;
-    let py = |y: f64| lower - ((y - y_min) / (y_max - y_min) * f64::from(lower - upper)).round() as i32;
+    let px =
+        |x: f64| left + ((x - x_min) / (x_max - x_min) * f64::from(right - left)).round() as i32;
+    let py =
+        |y: f64| lower - ((y - y_min) / (y_max - y_min) * f64::from(lower - upper)).round() as i32;
     for t in ticks(y_min, y_max, 5) {
         root.draw(&PathElement::new(vec![(left, py(t)), (right, py(t))], GRID))?;
         let label = format_tick(t);
-        text(root, &label, left - 8 - 2 * font::text_width(&label) as i32, py(t) - font::GLYPH_H as i32, 2, &TEXT)?;
+        text(
+            root,
+            &label,
+            left - 8 - 2 * font::text_width(&label) as i32,
+            py(t) - font::GLYPH_H as i32,
+            2,
+            &TEXT,
+        )?;
     }
     for t in ticks(x_min, x_max, 6) {
-        root.draw(&PathElement::new(vec![(px(t), upper), (px(t), lower)], GRID))?;
+        root.draw(&PathElement::new(
+            vec![(px(t), upper), (px(t), lower)],
+            GRID,
+        ))?;
         let label = format_tick(t);
-        text(root, &label, px(t) - font::text_width(&label) as i32, lower + 8, 2, &TEXT)?;
+        text(
+            root,
+            &label,
+            px(t) - font::text_width(&label) as i32,
+            lower + 8,
+            2,
+            &TEXT,
+        )?;
     }
     root.draw(&Rectangle::new([(left, upper), (right, lower)], TEXT))?;
     let x_label = format!("{} ->", figure.x_key);
-    text(root, &x_label, right - 2 * font::text_width(&x_label) as i32, lower + 32, 2, &TEXT)?;
+    text(
+        root,
+        &x_label,
+        right - 2 * font::text_width(&x_label) as i32,
+        lower + 32,
+        2,
+        &TEXT,
+    )?;
     for &(i, band) in &bands {
         let color = PALETTE[i % PALETTE.len()];
         if band.n_seeds > 1 {
-            let mut polygon: Vec<(i32, i32)> =
-                band.x.iter().zip(&band.mean).zip(&band.half_width).map(|((x, m), h)| (px(*x), py(m + h))).collect();
-            polygon.extend(band.x.iter().zip(&band.mean).zip(&band.half_width).rev().map(|((x, m), h)| (px(*x), py(m - h))));
+            let mut polygon: Vec<(i32, i32)> = band
+                .x
+                .iter()
+                .zip(&band.mean)
+                .zip(&band.half_width)
+                .map(|((x, m), h)| (px(*x), py(m + h)))
+                .collect();
+            polygon.extend(
+                band.x
+                    .iter()
+                    .zip(&band.mean)
+                    .zip(&band.half_width)
+                    .rev()
+                    .map(|((x, m), h)| (px(*x), py(m - h))),
+            );
             root.draw(&Polygon::new(polygon, color.mix(0.2).filled()))?;
         }
-        let line: Vec<(i32, i32)> = band.x.iter().zip(&band.mean).map(|(x, m)| (px(*x), py(*m))).collect();
+        let line: Vec<(i32, i32)> = band
+            .x
+            .iter()
+            .zip(&band.mean)
+            .map(|(x, m)| (px(*x), py(*m)))
+            .collect();
         root.draw(&PathElement::new(line, color.stroke_width(2)))?;
     }
     // Legend, top left inside the panel.
     for (row, &(i, band)) in bands.iter().enumerate() {
         let color = PALETTE[i % PALETTE.len()];
         let y = upper + 10 + row as i32 * 20;
-        root.draw(&Rectangle::new([(left + 10, y), (left + 30, y + 12)], color.filled()))?;
+        root.draw(&Rectangle::new(
+            [(left + 10, y), (left + 30, y + 12)],
+            color.filled(),
+        ))?;
         let label = format!("{} (n={})", figure.arms[i].0, band.n_seeds);
         text(root, &label, left + 38, y, 2, &TEXT)?;
     }
@@ -308,8 +433,11 @@ fn draw_panel<'a>(root: &Area<'a>, figure: &Figure, p: usize, metric: &str, top:
 
 /// `asi plot`: reads the runs, aggregates, draws `out`; prints what it plotted.
 pub fn run(args: &crate::cli::PlotArgs) -> anyhow::Result<()> {
-    let metrics: Vec<String> =
-        if args.metric.is_empty() { DEFAULT_METRICS.iter().map(|m| (*m).to_owned()).collect() } else { args.metric.clone() };
+    let metrics: Vec<String> = if args.metric.is_empty() {
+        DEFAULT_METRICS.iter().map(|m| (*m).to_owned()).collect()
+    } else {
+        args.metric.clone()
+    };
     let figure = build_figure(&args.run_dirs, &args.x, &metrics)?;
     for (arm, bands) in &figure.arms {
         for (metric, band) in metrics.iter().zip(bands) {
@@ -335,7 +463,10 @@ mod tests {
     use super::*;
 
     fn series(points: &[(f64, f64)]) -> Series {
-        Series { x: points.iter().map(|p| p.0).collect(), y: points.iter().map(|p| p.1).collect() }
+        Series {
+            x: points.iter().map(|p| p.0).collect(),
+            y: points.iter().map(|p| p.1).collect(),
+        }
     }
 
     #[test]
@@ -363,7 +494,11 @@ mod tests {
         ];
         let band = aggregate(&seeds).unwrap();
         assert_eq!(band.n_seeds, 3);
-        assert_eq!(*band.x.last().unwrap(), 10.0, "grid ends at the shortest run");
+        assert_eq!(
+            *band.x.last().unwrap(),
+            10.0,
+            "grid ends at the shortest run"
+        );
         assert!((band.mean.last().unwrap() - 2.0).abs() < 1e-12);
         assert!((band.half_width.last().unwrap() - 4.303 / 3f64.sqrt()).abs() < 1e-9);
         // Midpoint x = 5 (grid point 100 of 200 is not exactly 5; interpolate by hand instead).
@@ -377,15 +512,23 @@ mod tests {
     fn one_seed_has_no_band_and_empty_input_none() {
         let band = aggregate(&[series(&[(0.0, 1.0), (4.0, 3.0)])]).unwrap();
         assert!(band.half_width.iter().all(|h| *h == 0.0));
-        assert!((interpolate(&series(&[(0.0, 1.0), (4.0, 3.0)]), 1.0).unwrap() - 1.5).abs() < 1e-12);
+        assert!(
+            (interpolate(&series(&[(0.0, 1.0), (4.0, 3.0)]), 1.0).unwrap() - 1.5).abs() < 1e-12
+        );
         assert!(aggregate(&[]).is_none());
         assert!(aggregate(&[series(&[])]).is_none());
     }
 
     #[test]
     fn ticks_are_nice_and_labels_short() {
-        assert_eq!(ticks(0.0, 1.0, 5), vec![0.0, 0.2, 0.4, 0.6000000000000001, 0.8, 1.0]);
-        assert_eq!(ticks(0.0, 1_000_000.0, 4), vec![0.0, 500_000.0, 1_000_000.0]);
+        assert_eq!(
+            ticks(0.0, 1.0, 5),
+            vec![0.0, 0.2, 0.4, 0.6000000000000001, 0.8, 1.0]
+        );
+        assert_eq!(
+            ticks(0.0, 1_000_000.0, 4),
+            vec![0.0, 500_000.0, 1_000_000.0]
+        );
         assert_eq!(format_tick(1_500_000.0), "1.5M");
         assert_eq!(format_tick(20_000.0), "20K");
         assert_eq!(format_tick(0.25), "0.25");
@@ -418,7 +561,15 @@ mod tests {
         let runs: Vec<PathBuf> = (0..2).map(|s| dir.join(format!("arm_seed-{s}"))).collect();
         for (s, run) in runs.iter().enumerate() {
             std::fs::create_dir_all(run).unwrap();
-            let lines: String = (0..20).map(|k| format!("{{\"x\":{},\"m\":{}}}\n", k * 100, k as f64 * 0.05 * (1.0 + s as f64 * 0.1))).collect();
+            let lines: String = (0..20)
+                .map(|k| {
+                    format!(
+                        "{{\"x\":{},\"m\":{}}}\n",
+                        k * 100,
+                        k as f64 * 0.05 * (1.0 + s as f64 * 0.1)
+                    )
+                })
+                .collect();
             std::fs::write(run.join("metrics.jsonl"), lines).unwrap();
         }
         let figure = build_figure(&runs, "x", &["m".to_owned(), "absent".to_owned()]).unwrap();

@@ -6,11 +6,13 @@ use std::time::{Duration, Instant};
 use actor::{GraphTransport, ServiceOracle};
 use anyhow::Context;
 use iceoryx2::prelude::*;
-use nets::TaskDims;
-use protocol::transport::{open_node, Ipc, ValuePublisher};
 use learner::{RouteSource, RoutesReply};
+use nets::TaskDims;
 use protocol::graph::{GraphRequestHeader, GraphResponseHeader, RouteQuery};
-use protocol::{Config, GraphRequest, GraphResponse, MetricsSample, PhiVersion, ProcessRole, StepLayout};
+use protocol::transport::{open_node, Ipc, ValuePublisher};
+use protocol::{
+    Config, GraphRequest, GraphResponse, MetricsSample, PhiVersion, ProcessRole, StepLayout,
+};
 
 use crate::channels::GraphClient;
 use crate::run::RunContext;
@@ -26,8 +28,11 @@ pub struct TaskInfo {
 /// Builds the run's environment once to learn its dimensions (and to fail early, with the
 /// registry's list of names, on an unknown task).
 pub fn task_info(config: &Config) -> anyhow::Result<TaskInfo> {
-    let options = envs::EnvOptions { max_steps: config.env.episode_length };
-    let env = envs::make_with(&config.env.task, options).with_context(|| format!("building task `{}`", config.env.task))?;
+    let options = envs::EnvOptions {
+        max_steps: config.env.episode_length,
+    };
+    let env = envs::make_with(&config.env.task, options)
+        .with_context(|| format!("building task `{}`", config.env.task))?;
     let spec = env.spec();
     let dims = TaskDims {
         obs_dim: spec.obs_dim,
@@ -35,8 +40,17 @@ pub fn task_info(config: &Config) -> anyhow::Result<TaskInfo> {
         action_dim: spec.action_dim,
         action_scale: f64::from(spec.action_high.iter().copied().fold(0.0f32, f32::max)),
     };
-    let layout = StepLayout::new(spec.obs_dim, spec.action_dim, spec.goal_dim, config.encoder.out_dim)?;
-    Ok(TaskInfo { dims, layout, episode_length: spec.max_steps })
+    let layout = StepLayout::new(
+        spec.obs_dim,
+        spec.action_dim,
+        spec.goal_dim,
+        config.encoder.out_dim,
+    )?;
+    Ok(TaskInfo {
+        dims,
+        layout,
+        episode_length: spec.max_steps,
+    })
 }
 
 /// The process's iceoryx2 node, named after run and role.
@@ -51,7 +65,9 @@ pub struct StopWatch {
 
 impl StopWatch {
     pub fn new() -> Self {
-        Self { parent: std::os::unix::process::parent_id() }
+        Self {
+            parent: std::os::unix::process::parent_id(),
+        }
     }
 
     /// A termination signal arrived (iceoryx2's handler), or the launcher died (we were
@@ -78,7 +94,12 @@ pub struct MetricsOut {
 }
 
 impl MetricsOut {
-    pub fn new(publisher: ValuePublisher<MetricsSample>, role: ProcessRole, source_id: u32, config: &Config) -> Self {
+    pub fn new(
+        publisher: ValuePublisher<MetricsSample>,
+        role: ProcessRole,
+        source_id: u32,
+        config: &Config,
+    ) -> Self {
         Self {
             publisher,
             role,
@@ -98,9 +119,10 @@ impl MetricsOut {
     pub fn publish(&mut self, env_step: u64, values: &[(String, f64)]) {
         let wall_ms = self.started.elapsed().as_millis() as u64;
         for (name, value) in values {
-            let sent = MetricsSample::new(self.role, self.source_id, name, *value, env_step, wall_ms)
-                .map_err(anyhow::Error::from)
-                .and_then(|sample| self.publisher.send(sample).map_err(anyhow::Error::from));
+            let sent =
+                MetricsSample::new(self.role, self.source_id, name, *value, env_step, wall_ms)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|sample| self.publisher.send(sample).map_err(anyhow::Error::from));
             if let Err(err) = sent {
                 tracing::warn!("metric `{name}` not sent: {err:#}");
             }
@@ -111,7 +133,9 @@ impl MetricsOut {
 
 /// The newest weights message waiting on `weights`, if any (older ones are superseded).
 /// A receive failure is logged; the caller simply keeps its current weights.
-pub fn newest_weights(weights: &crate::channels::WeightsSubscriber) -> Option<(protocol::WeightsHeader, Vec<u8>)> {
+pub fn newest_weights(
+    weights: &crate::channels::WeightsSubscriber,
+) -> Option<(protocol::WeightsHeader, Vec<u8>)> {
     let mut newest = None;
     if let Err(err) = weights.drain(|header, bytes| newest = Some((*header, bytes.to_vec()))) {
         tracing::warn!("receiving weights failed: {err:#}");
@@ -129,15 +153,23 @@ pub struct CoverageTracker {
 
 impl CoverageTracker {
     pub fn new(config: &Config, layout: StepLayout) -> anyhow::Result<Self> {
-        let options = envs::EnvOptions { max_steps: config.env.episode_length };
-        let env = envs::make_with(&config.env.task, options).with_context(|| format!("building task `{}`", config.env.task))?;
-        Ok(Self { coverage: env.maze().map(envs::Coverage::new), layout })
+        let options = envs::EnvOptions {
+            max_steps: config.env.episode_length,
+        };
+        let env = envs::make_with(&config.env.task, options)
+            .with_context(|| format!("building task `{}`", config.env.task))?;
+        Ok(Self {
+            coverage: env.maze().map(envs::Coverage::new),
+            layout,
+        })
     }
 
     /// Counts the achieved xy of every record of an accepted chunk payload (records that do not
     /// decode were refused by the learner already and are skipped here).
     pub fn observe(&mut self, payload: &[f32]) {
-        let Some(coverage) = self.coverage.as_mut() else { return };
+        let Some(coverage) = self.coverage.as_mut() else {
+            return;
+        };
         let len = self.layout.record_len();
         if len == 0 || self.layout.goal_dim < 2 {
             return;
@@ -154,7 +186,10 @@ impl CoverageTracker {
         match &self.coverage {
             Some(c) => vec![
                 ("charts/coverage".to_owned(), c.coverage()),
-                ("charts/coverage_free_cells_visited".to_owned(), c.n_visited_free_cells() as f64),
+                (
+                    "charts/coverage_free_cells_visited".to_owned(),
+                    c.n_visited_free_cells() as f64,
+                ),
             ],
             None => Vec::new(),
         }
@@ -176,24 +211,40 @@ pub struct IpcGraph {
 
 impl IpcGraph {
     pub fn new(client: GraphClient, timeout: Duration) -> Self {
-        Self { client, timeout, unreachable_until: None, n_unreachable: 0 }
+        Self {
+            client,
+            timeout,
+            unreachable_until: None,
+            n_unreachable: 0,
+        }
     }
 }
 
 impl GraphTransport for IpcGraph {
-    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+    fn call(
+        &mut self,
+        header: &GraphRequestHeader,
+        body: &[u8],
+    ) -> Result<(GraphResponseHeader, Vec<u8>), String> {
         if let Some(until) = self.unreachable_until {
             if Instant::now() < until {
-                return Err("graph-service unreachable (cooling down after a failed request)".to_owned());
+                return Err(
+                    "graph-service unreachable (cooling down after a failed request)".to_owned(),
+                );
             }
             self.unreachable_until = None;
         }
-        self.client.call(*header, body, self.timeout).map_err(|err| {
-            self.n_unreachable += 1;
-            self.unreachable_until = Some(Instant::now() + self.timeout);
-            tracing::warn!("graph request failed; no graph requests for {:?}: {err:#}", self.timeout);
-            err.to_string()
-        })
+        self.client
+            .call(*header, body, self.timeout)
+            .map_err(|err| {
+                self.n_unreachable += 1;
+                self.unreachable_until = Some(Instant::now() + self.timeout);
+                tracing::warn!(
+                    "graph request failed; no graph requests for {:?}: {err:#}",
+                    self.timeout
+                );
+                err.to_string()
+            })
     }
 }
 
@@ -204,7 +255,11 @@ pub struct PhiTracking<T> {
 }
 
 impl<T: GraphTransport> GraphTransport for PhiTracking<T> {
-    fn call(&mut self, header: &GraphRequestHeader, body: &[u8]) -> Result<(GraphResponseHeader, Vec<u8>), String> {
+    fn call(
+        &mut self,
+        header: &GraphRequestHeader,
+        body: &[u8],
+    ) -> Result<(GraphResponseHeader, Vec<u8>), String> {
         self.last_phi = None;
         let reply = self.inner.call(header, body)?;
         self.last_phi = Some(reply.0.phi_version);
@@ -223,16 +278,25 @@ pub struct GraphRoutes<T> {
 
 impl<T: GraphTransport> GraphRoutes<T> {
     pub fn new(transport: T) -> Self {
-        Self { oracle: ServiceOracle::new(PhiTracking { inner: transport, last_phi: None }) }
+        Self {
+            oracle: ServiceOracle::new(PhiTracking {
+                inner: transport,
+                last_phi: None,
+            }),
+        }
     }
 }
 
 impl<T: GraphTransport> RouteSource for GraphRoutes<T> {
     fn routes(&mut self, queries: &[RouteQuery], phi_version: PhiVersion) -> RoutesReply {
-        let request = GraphRequest::Routes { queries: queries.to_vec() };
+        let request = GraphRequest::Routes {
+            queries: queries.to_vec(),
+        };
         let answer = self.oracle.ask(&request, phi_version);
         match (answer, self.oracle.transport().last_phi) {
-            (Some(GraphResponse::Routes(_)), Some(graph)) if graph != phi_version => RoutesReply::PhiMismatch { graph },
+            (Some(GraphResponse::Routes(_)), Some(graph)) if graph != phi_version => {
+                RoutesReply::PhiMismatch { graph }
+            }
             (Some(GraphResponse::Routes(answers)), _) => RoutesReply::Answered(answers),
             (Some(other), _) => {
                 tracing::warn!(answer = ?other, "unusable answer to a routes request");

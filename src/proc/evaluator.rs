@@ -38,7 +38,11 @@ pub struct EvalSchedule {
 
 impl EvalSchedule {
     pub fn new(interval: u64) -> Self {
-        Self { interval: interval.max(1), done: 0, skipped: 0 }
+        Self {
+            interval: interval.max(1),
+            done: 0,
+            skipped: 0,
+        }
     }
 
     /// The index of the evaluation to run now for `train_episodes`, if one is due; marks it
@@ -66,13 +70,19 @@ pub fn eval_seed(config: &protocol::Config) -> u64 {
 pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
     let info = task_info(config)?;
-    let mut evaluator = Evaluator::new(config, eval_seed(config)).context("building the evaluator")?;
+    let mut evaluator =
+        Evaluator::new(config, eval_seed(config)).context("building the evaluator")?;
     let mut saver = WeightsSaver::new(&ctx.run_dir);
     let mut last_weights = None;
     let node = node(ctx, "evaluator")?;
     let channels = Channels::new(config, &ctx.run_id, &info.layout);
     let weights = channels.weights_subscriber(&node)?;
-    let mut metrics = MetricsOut::new(channels.metrics_publisher(&node)?, ProcessRole::Evaluator, 0, config);
+    let mut metrics = MetricsOut::new(
+        channels.metrics_publisher(&node)?,
+        ProcessRole::Evaluator,
+        0,
+        config,
+    );
     let stop = StopWatch::new();
     let mut schedule = EvalSchedule::new(config.eval.interval_episodes);
     let plots = ctx.run_dir.join("plots");
@@ -106,7 +116,10 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             policy_version = report.policy_version.0,
             "evaluation"
         );
-        metrics.publish(0, &eval_metrics(&report, &header, schedule.skipped(), n_rejected));
+        metrics.publish(
+            0,
+            &eval_metrics(&report, &header, schedule.skipped(), n_rejected),
+        );
         append_report(ctx, &report, &header)?;
         if let Some(maze) = evaluator.maze() {
             let path = plots.join("eval_latest.png");
@@ -121,7 +134,12 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     if let Some((header, bytes)) = &last_weights {
         saver.offer(header, bytes, true);
     }
-    tracing::info!(reason, evaluations = schedule.done, skipped = schedule.skipped(), "evaluator stopping");
+    tracing::info!(
+        reason,
+        evaluations = schedule.done,
+        skipped = schedule.skipped(),
+        "evaluator stopping"
+    );
     ctx.write_status(
         "evaluator",
         &serde_json::json!({
@@ -131,24 +149,46 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     )
 }
 
-pub fn eval_metrics(report: &EvalReport, header: &WeightsHeader, skipped: u64, rejected: u64) -> Vec<(String, f64)> {
+pub fn eval_metrics(
+    report: &EvalReport,
+    header: &WeightsHeader,
+    skipped: u64,
+    rejected: u64,
+) -> Vec<(String, f64)> {
     vec![
         ("eval/success_rate".to_owned(), report.success_rate),
-        ("eval/mean_final_distance".to_owned(), report.mean_final_distance),
+        (
+            "eval/mean_final_distance".to_owned(),
+            report.mean_final_distance,
+        ),
         ("eval/mean_length".to_owned(), report.mean_length),
         ("eval/mean_return".to_owned(), report.mean_return),
         ("eval/index".to_owned(), report.index as f64),
-        ("eval/train_episodes".to_owned(), header.schedule.train_episodes as f64),
-        ("eval/policy_version".to_owned(), report.policy_version.0 as f64),
+        (
+            "eval/train_episodes".to_owned(),
+            header.schedule.train_episodes as f64,
+        ),
+        (
+            "eval/policy_version".to_owned(),
+            report.policy_version.0 as f64,
+        ),
         ("eval/skipped".to_owned(), skipped as f64),
         ("eval/weights_rejected".to_owned(), rejected as f64),
     ]
 }
 
 /// One JSON line per evaluation in `run_dir/eval.jsonl`.
-pub fn append_report(ctx: &RunContext, report: &EvalReport, header: &WeightsHeader) -> anyhow::Result<()> {
+pub fn append_report(
+    ctx: &RunContext,
+    report: &EvalReport,
+    header: &WeightsHeader,
+) -> anyhow::Result<()> {
     let path = ctx.run_dir.join("eval.jsonl");
-    let mut file = OpenOptions::new().create(true).append(true).open(&path).with_context(|| format!("opening {}", path.display()))?;
+    let mut file = OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .with_context(|| format!("opening {}", path.display()))?;
     let line = serde_json::json!({
         "index": report.index,
         "train_episodes": header.schedule.train_episodes,
