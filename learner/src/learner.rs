@@ -129,6 +129,9 @@ struct Telemetry {
     high: SacStats,
     train_secs: f64,
     updates_timed: u64,
+    /// Updates skipped because a loss was NaN or infinite (nothing was stepped).
+    skipped_nonfinite_low: u64,
+    skipped_nonfinite_high: u64,
     last_policy_lag: u64,
     max_policy_lag: u64,
 }
@@ -399,17 +402,22 @@ impl Learner {
             replay.fill(stage, k, i)
         });
         let batch = to_tensors(&self.low_stage)?;
-        match &mut self.nets.low {
+        let outcome = match &mut self.nets.low {
             LowLevel::Sac(level) => {
                 let (batch_size, dim) = (self.low_stage.batch, self.spec.action_dim);
                 let (next_eps, eps) = noise_pair(&mut self.rng, &mut self.noise, batch_size, dim)?;
-                self.telemetry.low = level.update(&batch, &next_eps, &eps)?;
+                level
+                    .update(&batch, &next_eps, &eps)
+                    .map(|stats| self.telemetry.low = stats)
             }
             LowLevel::Deterministic(level) => {
                 level.set_lr_for_episodes(self.schedule.train_episodes());
-                self.telemetry.low_deterministic = level.update(&batch, self.updates_low)?;
+                level
+                    .update(&batch, self.updates_low)
+                    .map(|stats| self.telemetry.low_deterministic = stats)
             }
-        }
+        };
+        skip_if_nonfinite(outcome, &mut self.telemetry.skipped_nonfinite_low)?;
         self.updates_low += 1;
         Ok(())
     }
@@ -424,7 +432,12 @@ impl Learner {
         let batch = to_tensors(&self.high_stage)?;
         let (batch_size, dim) = (self.high_stage.batch, self.spec.latent_dim);
         let (next_eps, eps) = noise_pair(&mut self.rng, &mut self.noise, batch_size, dim)?;
-        self.telemetry.high = self.nets.high.update(&batch, &next_eps, &eps)?;
+        let outcome = self
+            .nets
+            .high
+            .update(&batch, &next_eps, &eps)
+            .map(|stats| self.telemetry.high = stats);
+        skip_if_nonfinite(outcome, &mut self.telemetry.skipped_nonfinite_high)?;
         self.updates_high += 1;
         Ok(())
     }
@@ -666,6 +679,14 @@ impl Learner {
             ("charts/updates_per_sec", per_sec),
             ("charts/updates_low", p.updates_low as f64),
             ("charts/updates_high", p.updates_high as f64),
+            (
+                "charts/skipped_nonfinite_low",
+                t.skipped_nonfinite_low as f64,
+            ),
+            (
+                "charts/skipped_nonfinite_high",
+                t.skipped_nonfinite_high as f64,
+            ),
             ("charts/policy_version", p.policy_version.0 as f64),
             ("charts/policy_lag", t.last_policy_lag as f64),
             ("charts/policy_lag_max", t.max_policy_lag as f64),
@@ -837,4 +858,23 @@ fn to_tensors(stage: &BatchStage) -> Result<SacBatch, LearnerError> {
         reward: Tensor::from_slice(&stage.reward, (b, 1), &cpu)?,
         terminal: Tensor::from_slice(&stage.terminal, (b, 1), &cpu)?,
     })
+}
+
+/// An update that met a NaN or infinite loss ends there: each loss is checked before its Adam
+/// step, so the offending step and everything after it in that update (later steps, Polyak,
+/// temperature) are not applied, and no non-finite value reaches the weights. The update is
+/// counted in `skipped` (metrics `charts/skipped_nonfinite_*`) and training goes on; it still
+/// counts toward the update ratio, so a recurring bad batch cannot stall the actors. Any
+/// other error is returned.
+fn skip_if_nonfinite(
+    outcome: Result<(), LearnerError>,
+    skipped: &mut u64,
+) -> Result<(), LearnerError> {
+    match outcome {
+        Err(LearnerError::NonFinite { .. }) => {
+            *skipped += 1;
+            Ok(())
+        }
+        other => other,
+    }
 }

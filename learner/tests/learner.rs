@@ -138,3 +138,49 @@ fn policy_lag_is_the_learner_version_minus_the_acting_version() {
         .1;
     assert_eq!(lag, 1.0);
 }
+
+#[test]
+fn updates_with_non_finite_losses_are_skipped_counted_and_leave_the_weights_unchanged() {
+    // Finite values the protocol accepts, large enough that rewards and losses overflow.
+    let mut l = learner();
+    for ep in 0..4u64 {
+        let mut records = steps(0..10, ep, 2, 9);
+        for r in &mut records {
+            r.reward = -3.0e38;
+            r.phi = vec![3.0e38, 0.0];
+            r.next_phi = vec![-3.0e38, 0.0];
+        }
+        let flags = protocol::TrajectoryFlags::EPISODE_START
+            | protocol::TrajectoryFlags::EPISODE_END
+            | protocol::TrajectoryFlags::TRUNCATED;
+        ingest(&mut l, 0, ep, 0, &records, flags).unwrap();
+    }
+    let ran = l
+        .train(usize::MAX)
+        .expect("non-finite losses are not an error");
+    let p = l.progress();
+    assert!(p.updates_low > 0 && p.updates_high > 0, "{p:?}");
+    assert_eq!(ran as u64, p.updates_low + p.updates_high);
+    let metrics = l.metrics();
+    let get = |name: &str| metrics.iter().find(|(n, _)| *n == name).unwrap().1;
+    assert_eq!(get("charts/skipped_nonfinite_low"), p.updates_low as f64);
+    assert_eq!(get("charts/skipped_nonfinite_high"), p.updates_high as f64);
+    // Nothing was stepped: the published weights are those of an untrained learner.
+    let (_, trained) = l.publish_due().unwrap().expect("first publication");
+    let (_, fresh) = learner().publish_due().unwrap().expect("first publication");
+    assert!(trained == fresh, "weights changed by skipped updates");
+
+    // A learner on ordinary data skips nothing.
+    let mut ok = learner();
+    for ep in 0..4 {
+        ingest_episode(&mut ok, 0, ep, 10, 2, 5);
+    }
+    ok.train(usize::MAX).unwrap();
+    let metrics = ok.metrics();
+    let skipped = metrics
+        .iter()
+        .filter(|(n, _)| n.starts_with("charts/skipped_nonfinite"))
+        .map(|(_, v)| *v)
+        .sum::<f64>();
+    assert_eq!(skipped, 0.0);
+}
