@@ -106,6 +106,13 @@ pub struct ActorStats {
     pub explore_reach_error_sum: f64,
     /// Full explore segments in `explore_reach_error_sum`.
     pub n_explore_reach_segments: u64,
+    /// Σ of the reaching ratios (end over start distance to the subgoal) of the full segments
+    /// of finished episodes that kept one φ (see `Episode::reach_ratio`).
+    pub reach_ratio_sum: f64,
+    /// Segments in `reach_ratio_sum`.
+    pub n_reach_ratio_segments: u64,
+    /// Mean reaching ratio over the last finished episode (`None`: no such segment).
+    pub last_episode_reach_ratio: Option<f32>,
     /// Mean reaching error over the full segments of the last finished episode (`None`: none).
     pub last_episode_reach_error: Option<f32>,
     /// Mean reaching error over the full explore segments of the last finished episode.
@@ -230,6 +237,9 @@ impl Actor {
                 explore_reach_error_sum: 0.0,
                 n_explore_reach_segments: 0,
                 last_episode_reach_error: None,
+                reach_ratio_sum: 0.0,
+                n_reach_ratio_segments: 0,
+                last_episode_reach_ratio: None,
                 last_episode_explore_reach_error: None,
                 last_episode_far_goal: false,
                 frontier: FrontierStats::default(),
@@ -460,6 +470,9 @@ impl Actor {
             stats.explore_reach_error_sum += episode.reach_explore.sum;
             stats.n_explore_reach_segments += episode.reach_explore.n;
             stats.last_episode_reach_error = episode.reach_all.mean();
+            stats.reach_ratio_sum += episode.reach_ratio.sum;
+            stats.n_reach_ratio_segments += episode.reach_ratio.n;
+            stats.last_episode_reach_ratio = episode.reach_ratio.mean();
             stats.last_episode_explore_reach_error = episode.reach_explore.mean();
             tracing::debug!(
                 actor = self.actor_id.0,

@@ -133,6 +133,10 @@ pub(crate) struct Episode {
     pub reach_all: ReachTally,
     /// Reaching errors of the full explore segments.
     pub reach_explore: ReachTally,
+    /// Reaching ratios ‖subgoal − φ(s_{t+c})‖ / ‖subgoal − φ(s_t)‖ of the full segments whose
+    /// φ did not change mid-segment and whose subgoal was not at the start: scale-free, so
+    /// comparable across φ versions (1 = no progress, 0 = reached).
+    pub reach_ratio: ReachTally,
     /// Reaching samples not yet reported to the graph-service.
     pub reach_samples: Vec<ReachSample>,
     /// FR state, for frontier-reaching episodes.
@@ -141,6 +145,8 @@ pub(crate) struct Episode {
     low_noise_free: bool,
     /// Source of the segment in progress (`None` before the first decision).
     segment_source: Option<SubgoalSource>,
+    /// ‖subgoal − φ(s_t)‖ at the segment's decision; `None` after a φ change mid-segment.
+    segment_start_distance: Option<f32>,
     /// Un-pushed candidate of the explore segment in progress.
     candidate: Option<LatentPoint>,
     obs: Vec<f32>,
@@ -173,6 +179,8 @@ impl Episode {
             success: false,
             reach_all: ReachTally::default(),
             reach_explore: ReachTally::default(),
+            reach_ratio: ReachTally::default(),
+            segment_start_distance: None,
             reach_samples: Vec::new(),
             frontier,
             low_noise_free: false,
@@ -237,14 +245,13 @@ impl Episode {
         let Some(source) = self.segment_source else {
             return;
         };
-        let error = self
-            .subgoal
-            .iter()
-            .zip(&self.phi)
-            .map(|(sg, phi)| (sg - phi) * (sg - phi))
-            .sum::<f32>()
-            .sqrt();
+        let error = self.subgoal_distance();
         self.reach_all.add(error);
+        if let Some(start) = self.segment_start_distance.take() {
+            if start > f32::EPSILON {
+                self.reach_ratio.add(error / start);
+            }
+        }
         if source == SubgoalSource::Explore {
             self.reach_explore.add(error);
         }
@@ -253,6 +260,16 @@ impl Episode {
                 self.reach_samples.push(ReachSample { subgoal, error });
             }
         }
+    }
+
+    /// ‖subgoal − φ(s_t)‖ at the current state.
+    fn subgoal_distance(&self) -> f32 {
+        self.subgoal
+            .iter()
+            .zip(&self.phi)
+            .map(|(sg, phi)| (sg - phi) * (sg - phi))
+            .sum::<f32>()
+            .sqrt()
     }
 
     /// At t mod c = 0: closes the previous segment and decides the next (delta and subgoal from
@@ -286,6 +303,7 @@ impl Episode {
         )?;
         self.decision_obs.copy_from_slice(&self.obs);
         self.segment_source = Some(decided.source);
+        self.segment_start_distance = Some(self.subgoal_distance());
         self.candidate = decided.candidate;
         self.low_noise_free = false;
         let counters = &mut rollout.decisions;
@@ -323,6 +341,7 @@ impl Episode {
             FrChoice::Count { .. } => SubgoalSource::FrontierCount,
         };
         self.segment_source = Some(source);
+        self.segment_start_distance = Some(self.subgoal_distance());
         self.candidate = Some(decided.subgoal);
         rollout.decisions.n_decisions += 1;
         let stats = &mut rollout.frontier_stats;
@@ -421,6 +440,8 @@ impl Episode {
         records: impl Iterator<Item = &'r mut [f32]>,
     ) -> Result<(), ActorError> {
         let latent = self.phi.len();
+        // Start and end distance would be in different φ-spaces.
+        self.segment_start_distance = None;
         let fresh = nets.phi_rows(&[&self.obs[..], &self.decision_obs[..]].concat(), 2)?;
         self.phi.copy_from_slice(&fresh[..latent]);
         for (i, ((sg, phi_d), delta)) in self

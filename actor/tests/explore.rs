@@ -211,6 +211,18 @@ fn segment_errors(records: &[StepRecord]) -> Vec<(DecisionKind, f32)> {
         .collect()
 }
 
+/// The reaching ratios of the full segments of `records` (c = 10): ‖subgoal − φ(s_{t+c})‖ over
+/// ‖subgoal − φ(s_t)‖ at the decision step.
+fn segment_ratios(records: &[StepRecord]) -> Vec<f32> {
+    (0..records.len() / 10)
+        .map(|k| {
+            let first = &records[10 * k];
+            let last = &records[10 * k + 9];
+            distance(&first.subgoal, &last.next_phi) / distance(&first.subgoal, &first.phi)
+        })
+        .collect()
+}
+
 fn close(a: f32, b: f32) -> bool {
     (a - b).abs() <= 1e-5 * b.abs().max(1.0)
 }
@@ -248,6 +260,9 @@ fn reaching_samples_and_means_carry_the_hand_computed_segment_errors() {
         let stats = actor.stats();
         let all = mean(errors.iter().map(|(_, err)| *err)).unwrap();
         assert!(close(stats.last_episode_reach_error.unwrap(), all));
+        let ratio = mean(segment_ratios(&records_of(&episode)).into_iter()).unwrap();
+        let got = stats.last_episode_reach_ratio.unwrap();
+        assert!(close(got, ratio), "reach ratio {got} vs {ratio}");
         let explore = mean(
             errors
                 .iter()
@@ -266,6 +281,7 @@ fn reaching_samples_and_means_carry_the_hand_computed_segment_errors() {
         stats.n_explore_decisions
     );
     assert_eq!(stats.n_reach_segments, 30);
+    assert_eq!(stats.n_reach_ratio_segments, 30);
     assert_eq!(stats.n_reach_samples_sent, n_samples);
     assert_eq!(stats.n_reach_reports, n_reports);
     assert_eq!(stats.n_reach_samples_dropped, 0);

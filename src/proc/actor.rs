@@ -223,6 +223,7 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
     );
     let optional = [
         ("actor/last_episode_reach_error", s.last_episode_reach_error),
+        ("actor/last_episode_reach_ratio", s.last_episode_reach_ratio),
         (
             "actor/last_episode_explore_reach_error",
             s.last_episode_explore_reach_error,
@@ -242,6 +243,7 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
 pub struct ReachMeans {
     all: (f64, u64),
     explore: (f64, u64),
+    ratio: (f64, u64),
 }
 
 impl ReachMeans {
@@ -257,6 +259,11 @@ impl ReachMeans {
                 "actor/explore_reach_error",
                 &mut self.explore,
                 (s.explore_reach_error_sum, s.n_explore_reach_segments),
+            ),
+            (
+                "actor/reach_ratio",
+                &mut self.ratio,
+                (s.reach_ratio_sum, s.n_reach_ratio_segments),
             ),
         ];
         for (name, last, now) in pairs {
