@@ -147,6 +147,33 @@ impl Coverage {
         (ix < self.n_x && iy < self.n_y).then(|| self.free[iy * self.n_x + ix])
     }
 
+    /// Row-major (`iy * n_x + ix`) visit counts of every cell (to save the grid).
+    pub fn counts(&self) -> &[u64] {
+        &self.counts
+    }
+
+    /// Sets the grid's counts to saved ones (`counts` as [`Coverage::counts`] gave them, and
+    /// [`Coverage::n_outside`]); the derived totals are recounted. Refused, changing nothing,
+    /// when `counts` does not have one entry per cell.
+    pub fn restore_counts(&mut self, counts: &[u64], n_outside: u64) -> Result<(), EnvError> {
+        if counts.len() != self.counts.len() {
+            return Err(EnvError::InvalidParam {
+                field: "coverage.counts".to_string(),
+                value: format!("{} cells", counts.len()),
+                reason: format!("the grid has {} cells", self.counts.len()),
+            });
+        }
+        self.counts.copy_from_slice(counts);
+        self.n_visits = counts.iter().sum();
+        self.n_visited_free_cells = counts
+            .iter()
+            .zip(&self.free)
+            .filter(|(&n, &free)| n > 0 && free)
+            .count();
+        self.n_outside = n_outside;
+        Ok(())
+    }
+
     /// The cell `(ix, iy)` holding `xy`; `None` outside the grid or not finite.
     pub fn cell_of(&self, xy: [f32; 2]) -> Option<(usize, usize)> {
         let ix = axis_cell(xy[0], self.area.low[0], self.cell_size_m, self.n_x)?;
@@ -190,4 +217,34 @@ fn cell_centre(area: Rect, cell_size_m: f32, ix: usize, iy: usize) -> [f32; 2] {
         area.low[0] + (ix as f32 + 0.5) * cell_size_m,
         area.low[1] + (iy as f32 + 0.5) * cell_size_m,
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::maze::MazeLayout;
+
+    #[test]
+    fn restored_counts_give_back_the_same_grid_and_a_wrong_length_is_refused() {
+        let maze = Maze::new(MazeLayout::U);
+        let mut visited = Coverage::new(&maze);
+        for xy in [
+            [0.0, 0.0],
+            [0.1, 0.1],
+            [8.0, 8.0],
+            [f32::NAN, 0.0],
+            [-1e6, 0.0],
+        ] {
+            visited.visit(xy);
+        }
+        assert_eq!(visited.n_visited_free_cells(), 2);
+        assert_eq!(visited.n_outside(), 2);
+        let mut restored = Coverage::new(&maze);
+        restored
+            .restore_counts(visited.counts(), visited.n_outside())
+            .unwrap();
+        assert_eq!(restored, visited);
+        assert!(restored.restore_counts(&visited.counts()[1..], 0).is_err());
+        assert_eq!(restored, visited, "a refused restore changes nothing");
+    }
 }
