@@ -62,8 +62,8 @@ pub const REACH_REPORT_BATCH: usize = 64;
 /// missing has probability below 1e-90).
 pub const MAX_FAR_GOAL_DRAWS: u32 = 1000;
 
-/// Counters of one actor, for metrics.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Counters of one actor, for metrics (saved whole in an [`crate::resume::ActorState`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ActorStats {
     /// Env steps taken (recorded or not), over all episodes.
     pub env_steps: u64,
@@ -83,6 +83,7 @@ pub struct ActorStats {
     /// Weights messages refused by [`Actor::load_weights`].
     pub n_weights_rejected: u64,
     /// The run-wide schedule of the last weights loaded ([`RunSchedule::START`] before any).
+    #[serde(with = "crate::resume::schedule_fields")]
     pub schedule: RunSchedule,
     /// High-level decisions taken.
     pub n_decisions: u64,
@@ -125,20 +126,23 @@ pub struct ActorStats {
 
 /// One actor: an environment, the actor-side networks, and the episode in progress.
 pub struct Actor {
-    rollout: Rollout,
-    episode: Option<Episode>,
+    pub(crate) rollout: Rollout,
+    pub(crate) episode: Option<Episode>,
     buffer: ChunkBuffer,
     layout: StepLayout,
     nets_spec: NetsSpec,
     header_template: TrajectoryHeader,
-    actor_id: ActorId,
+    pub(crate) actor_id: ActorId,
     seed: u64,
     chunk_steps: usize,
     random_episodes: u64,
     explore_start_episode: u64,
     far_goal_fraction: f64,
-    n_episodes_started: u64,
-    stats: ActorStats,
+    pub(crate) n_episodes_started: u64,
+    /// Physics failures counted before a restore ([`Actor::restore_state`]): the env's own
+    /// counter starts at 0 in a restored actor.
+    pub(crate) physics_failures_before: u64,
+    pub(crate) stats: ActorStats,
 }
 
 impl Actor {
@@ -216,6 +220,7 @@ impl Actor {
             explore_start_episode: config.exploration.explore_start_episode,
             far_goal_fraction: config.exploration.far_goal_fraction,
             n_episodes_started: 0,
+            physics_failures_before: 0,
             stats: ActorStats {
                 env_steps: 0,
                 episodes: 0,
@@ -560,7 +565,8 @@ impl Actor {
     pub fn stats(&self) -> ActorStats {
         let decisions = self.rollout.decisions;
         ActorStats {
-            n_physics_failures: self.rollout.env.n_physics_failures(),
+            n_physics_failures: self.physics_failures_before
+                + self.rollout.env.n_physics_failures(),
             n_decisions: decisions.n_decisions,
             n_explore_decisions: decisions.n_explore,
             n_explore_fallbacks: decisions.n_explore_fallbacks,

@@ -77,7 +77,7 @@ impl FrontierParams {
 }
 
 /// Counters of the FR part of an actor, over all its episodes.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct FrontierStats {
     /// Episodes started in FR mode (a frontier route was answered).
     pub n_episodes: u64,

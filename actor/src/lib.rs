@@ -17,6 +17,8 @@
 //! - `networks`: φ, π_hi, π_lo inference with double-buffered weights.
 //! - `record`: writing records into the `[f32]` payload.
 //! - [`seeds`]: episode ids and per-episode env seeds.
+//! - [`resume`]: [`resume::ActorState`], an actor's state between episodes (serial-mode
+//!   checkpoints).
 //!
 //! Invariants: no I/O and no threads here (the `asi` binary wires transport); every random
 //! choice comes from generators seeded from `(seed, actor_id)`, so runs replay exactly; errors are
@@ -32,6 +34,7 @@ pub mod frontier;
 mod networks;
 pub mod oracle;
 mod record;
+pub mod resume;
 pub mod seeds;
 pub mod subgoal;
 

@@ -480,3 +480,53 @@ fn weights_holding_nan_are_refused_and_change_nothing() {
         );
     }
 }
+
+#[test]
+fn an_actor_restored_between_episodes_continues_with_the_same_chunks_and_counters() {
+    let mut saved = failing_actor(60, true);
+    episodes(&mut saved, 2);
+    assert!(!saved.has_open_episode());
+    let state = saved.save_state();
+    assert!(!state.had_open_episode);
+    assert_eq!(state.n_episodes_started, 2);
+    let mut restored = failing_actor(60, true);
+    restored.restore_state(state.clone()).unwrap();
+    assert_eq!(restored.stats(), saved.stats());
+    assert_eq!(restored.stats().n_physics_failures, 2);
+    let mut counter_only = failing_actor(60, true);
+    counter_only.start_at_episode(2).unwrap();
+    let expected = episodes(&mut saved, 2);
+    assert_eq!(episodes(&mut restored, 2), expected);
+    assert_eq!(restored.stats(), saved.stats());
+    assert_eq!(restored.stats().n_physics_failures, 4);
+    assert_ne!(
+        episodes(&mut counter_only, 2),
+        expected,
+        "the episode counter alone does not restore the generator"
+    );
+    assert!(
+        restored.restore_state(state).is_err(),
+        "a state goes into a fresh actor only"
+    );
+}
+
+#[test]
+fn an_actor_saved_mid_episode_restores_as_if_that_episode_was_abandoned() {
+    let mut saved = failing_actor(60, true);
+    saved.next_chunk(&mut NoGraph).unwrap();
+    assert!(saved.has_open_episode());
+    let state = saved.save_state();
+    assert!(state.had_open_episode);
+    let mut restored = Actor::new(&config(30, 100), ActorId(0), 6).unwrap();
+    restored.restore_state(state).unwrap();
+    let next = restored.next_chunk(&mut NoGraph).unwrap();
+    assert!(next.header.flags.contains(F::EPISODE_START));
+    assert_eq!(
+        next.header.episode_id,
+        actor::seeds::episode_id(ActorId(0), 1).unwrap()
+    );
+    let wrong_id = Actor::new(&config(30, 100), ActorId(1), 6)
+        .unwrap()
+        .restore_state(saved.save_state());
+    assert!(wrong_id.is_err());
+}
