@@ -202,10 +202,15 @@ impl CheckpointTimer {
         }
     }
 
+    /// Whether the interval has passed since the last checkpoint (or failed attempt).
+    pub fn is_due(&self) -> bool {
+        self.last.elapsed() >= self.interval
+    }
+
     /// Writes a checkpoint if one is due and no φ round runs; a failed write is logged and
     /// retried at the next interval (training goes on). True when one was written.
     pub fn tick(&mut self, ctx: &RunContext, learner: &Learner) -> bool {
-        if self.last.elapsed() < self.interval {
+        if !self.is_due() {
             return false;
         }
         match save_checkpoint(ctx, learner) {

@@ -31,6 +31,8 @@ use crate::proc::graph_service::{open_service, Checkpoints};
 use crate::run::RunContext;
 use crate::weights_file::WeightsSaver;
 
+mod checkpoint;
+
 /// Updates per `train` call while catching up with the replay ratio.
 const UPDATE_BURST: usize = 64;
 
@@ -58,6 +60,18 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let task = task_info(config)?;
     let dims = task.dims;
     let seed = config.run.seed;
+    let serial_dir = ctx.checkpoint_dir().join(checkpoint::SUBDIR);
+    // Read and checked first: an incompatible serial checkpoint stops the run before anything
+    // is written.
+    let saved = match ctx.resume {
+        true => checkpoint::read_latest(&serial_dir, config).with_context(|| {
+            format!(
+                "restoring the serial state from {} (start over with `asi train --restart`)",
+                serial_dir.display()
+            )
+        })?,
+        false => None,
+    };
     let mut learner = crate::run::open_learner(&ctx, dims, task.episode_length)?;
     let graph_dir = ctx.checkpoint_dir().join(graph_service::checkpoint::SUBDIR);
     let (mut graph, start) = open_service(&ctx, &graph_dir, dims)?;
@@ -89,19 +103,41 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
     let mut eval = SerialEval::new(config, &ctx.run_dir)?;
     let mut coverage = CoverageTracker::new(config, task.layout)?;
-    eval.on_weights(
-        &ctx,
-        broadcast_weights(&mut learner, &mut actors, &mut graph)?,
-    )?;
-    let mut last_episodes = 0;
+    let mut loop_state = SerialLoop {
+        actors: &mut actors,
+        lines: &mut actor_lines,
+        eval: &mut eval,
+        coverage: &mut coverage,
+    };
+    let exact = match saved {
+        Some(saved) => loop_state.restore(saved, &learner, &graph)?,
+        None => {
+            if ctx.resume {
+                tracing::warn!(
+                    "no serial checkpoint in {}: the actors start new episodes and the resumed run \
+                     is not bit-identical to an uninterrupted one",
+                    serial_dir.display()
+                );
+            }
+            false
+        }
+    };
+    // An exact resume continues right after the round at which the checkpoint was written,
+    // whose broadcast the actors already hold; publishing here would add a broadcast.
+    if !exact {
+        eval.on_weights(
+            &ctx,
+            broadcast_weights(&mut learner, &mut actors, &mut graph)?,
+        )?;
+    }
+    let mut last_episodes = learner.ingest_stats().episodes_completed;
+    // Env steps at the last metrics line of this run (an exact resume had just written one).
+    let mut line_at = exact.then(|| learner.progress().env_steps_ingested);
     let mut checkpoints = crate::run::CheckpointTimer::new(config);
     install_stop_handlers();
     let mut stopped = false;
+    let mut waiting_logged = false;
     while !budget_reached(config, &learner) {
-        if STOP_REQUESTED.load(Ordering::Relaxed) {
-            stopped = true;
-            break;
-        }
         for (actor, line) in actors.iter_mut().zip(&mut actor_lines) {
             catch_up(&mut learner)?;
             let chunk = actor.next_chunk(&mut ServiceOracle::new(InProcessGraph(&mut graph)))?;
@@ -128,27 +164,75 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
                 &coverage,
             )?;
             last_episodes = episodes;
+            line_at = Some(learner.progress().env_steps_ingested);
         }
-        // Reads the learner and the graph only: the run's metrics do not depend on when
-        // checkpoints fall. The graph-service's checkpoint is written with the learner's.
-        if checkpoints.tick(&ctx, &learner) {
-            graph_checkpoints.write(&graph);
+        // Checkpoints and stops wait for a round boundary with no open episode, so that no
+        // environment state needs saving; they read state only, so the run's metrics do not
+        // depend on when they fall.
+        let stop = STOP_REQUESTED.load(Ordering::Relaxed);
+        if stop || checkpoints.is_due() {
+            if actors.iter().any(Actor::has_open_episode) {
+                if !waiting_logged {
+                    tracing::info!(
+                        "{}: letting the open episodes finish first",
+                        if stop {
+                            "stop requested"
+                        } else {
+                            "checkpoint due"
+                        }
+                    );
+                    waiting_logged = true;
+                }
+            } else if stop {
+                stopped = true;
+                break;
+            } else {
+                waiting_logged = false;
+                if checkpoints.tick(&ctx, &learner) {
+                    graph_checkpoints.write(&graph);
+                    let mut parts = SerialLoop {
+                        actors: &mut actors,
+                        lines: &mut actor_lines,
+                        eval: &mut eval,
+                        coverage: &mut coverage,
+                    };
+                    if let Err(err) = parts.save(&serial_dir, config, &learner, &graph) {
+                        tracing::error!("writing the serial checkpoint failed: {err:#}");
+                    }
+                }
+            }
         }
         picture.tick(episodes, &graph);
     }
-    write_line(
-        &mut metrics,
-        &learner,
-        &graph,
-        &actors,
-        &mut actor_lines,
-        &eval.latest,
-        &coverage,
-    )?;
+    if line_at != Some(learner.progress().env_steps_ingested) {
+        write_line(
+            &mut metrics,
+            &learner,
+            &graph,
+            &actors,
+            &mut actor_lines,
+            &eval.latest,
+            &coverage,
+        )?;
+    }
     metrics.flush()?;
     eval.finish();
     crate::run::final_checkpoint(&ctx, &mut learner)?;
     graph_checkpoints.write(&graph);
+    if actors.iter().any(Actor::has_open_episode) {
+        tracing::warn!(
+            "the run ended with open episodes: they are not saved, and a resume continues with \
+             new episodes (not bit-identical to an uninterrupted run)"
+        );
+    }
+    SerialLoop {
+        actors: &mut actors,
+        lines: &mut actor_lines,
+        eval: &mut eval,
+        coverage: &mut coverage,
+    }
+    .save(&serial_dir, config, &learner, &graph)
+    .context("writing the final serial checkpoint")?;
     picture.draw_if_behind(&graph);
     let env_steps = learner.progress().env_steps_ingested;
     if stopped {
@@ -161,6 +245,121 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         tracing::info!(env_steps, "serial run finished");
     }
     Ok(())
+}
+
+/// The serial loop's own state, borrowed to save or restore it (see [`checkpoint`]).
+struct SerialLoop<'a> {
+    actors: &'a mut [Actor],
+    lines: &'a mut [ActorLine],
+    eval: &'a mut SerialEval,
+    coverage: &'a mut CoverageTracker,
+}
+
+impl SerialLoop<'_> {
+    /// Writes the serial checkpoint beside the learner's and graph-service's just written.
+    fn save(
+        &mut self,
+        dir: &std::path::Path,
+        config: &protocol::Config,
+        learner: &Learner,
+        graph: &GraphService,
+    ) -> anyhow::Result<()> {
+        let clock = std::time::Instant::now();
+        let Some((header, bytes)) = &self.eval.last_weights else {
+            bail!("no weights were broadcast yet");
+        };
+        let state = checkpoint::SerialState {
+            actors: self.actors.iter().map(Actor::save_state).collect(),
+            published_steps: self.lines.iter().map(|l| l.published_steps).collect(),
+            eval_schedule: self.eval.schedule,
+            eval_latest: self.eval.latest.clone(),
+            coverage: self
+                .coverage
+                .grid_mut()
+                .map(|grid| (grid.counts().to_vec(), grid.n_outside())),
+            weights: checkpoint::SavedHeader::of(header),
+        };
+        let moment = (
+            learner.progress().env_steps_ingested,
+            graph.stats().stored_steps,
+        );
+        let path = checkpoint::write(dir, config, &state, bytes, moment)?;
+        tracing::info!(
+            secs = clock.elapsed().as_secs_f64(),
+            exact = state.actors.iter().all(|a| !a.had_open_episode),
+            "serial checkpoint written to {}",
+            path.display()
+        );
+        Ok(())
+    }
+
+    /// Restores a serial checkpoint into the fresh loop state; true when the resume is exact
+    /// (written between episodes, and of the same moment as the restored learner and graph).
+    fn restore(
+        &mut self,
+        saved: checkpoint::Restored,
+        learner: &Learner,
+        graph: &GraphService,
+    ) -> anyhow::Result<bool> {
+        let checkpoint::Restored {
+            state,
+            weights: (header, bytes),
+            manifest,
+            path,
+        } = saved;
+        let saved_lines = state.actors.into_iter().zip(state.published_steps);
+        for ((actor, line), (saved, steps)) in self
+            .actors
+            .iter_mut()
+            .zip(self.lines.iter_mut())
+            .zip(saved_lines)
+        {
+            actor.restore_state(saved)?;
+            actor.load_weights(&header, &bytes)?;
+            line.published_steps = steps;
+            // The metrics line written with the checkpoint consumed the reaching tallies.
+            line.reach_means.since_last(&actor.stats());
+        }
+        if let (Some(grid), Some((counts, n_outside))) = (self.coverage.grid_mut(), &state.coverage)
+        {
+            grid.restore_counts(counts, *n_outside)?;
+        }
+        self.eval.schedule = state.eval_schedule;
+        self.eval.latest = state.eval_latest;
+        self.eval.last_weights = Some((header, bytes));
+        let now = (
+            learner.progress().env_steps_ingested,
+            graph.stats().stored_steps,
+        );
+        let matched = now == (manifest.learner_env_steps, manifest.graph_stored_steps);
+        if !matched {
+            tracing::warn!(
+                "serial checkpoint {} is of another moment (learner env steps, graph stored steps) \
+                 = ({}, {}) than the restored learner and graph-service {now:?}: the resume is not \
+                 bit-exact",
+                path.display(),
+                manifest.learner_env_steps,
+                manifest.graph_stored_steps
+            );
+        } else if !manifest.exact {
+            tracing::warn!(
+                "serial checkpoint {} was written with open episodes: they are lost and the \
+                 resume is not bit-exact",
+                path.display()
+            );
+        }
+        let exact = matched && manifest.exact;
+        tracing::info!(
+            "serial state restored from {}: {}",
+            path.display(),
+            if exact {
+                "bit-exact resume"
+            } else {
+                "resume not bit-exact"
+            }
+        );
+        Ok(exact)
+    }
 }
 
 fn budget_reached(config: &protocol::Config, learner: &Learner) -> bool {

@@ -181,6 +181,11 @@ impl CoverageTracker {
         }
     }
 
+    /// The grid, if the task has a maze (serial-mode checkpoints save and restore it).
+    pub fn grid_mut(&mut self) -> Option<&mut envs::Coverage> {
+        self.coverage.as_mut()
+    }
+
     /// `charts/coverage` and `charts/coverage_free_cells_visited`, if the task has a maze.
     pub fn metrics(&self) -> Vec<(String, f64)> {
         match &self.coverage {

@@ -29,7 +29,7 @@ const WEIGHTS_WAIT: Duration = Duration::from_millis(200);
 
 /// Which evaluations are due: evaluation `k` (1, 2, …) falls due once the learner has
 /// completed `k × interval` training episodes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct EvalSchedule {
     interval: u64,
     done: u64,

@@ -41,7 +41,7 @@ pub fn distance_target(
 }
 
 /// Critic statistics.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DistanceCriticStats {
     /// The loss.
     pub loss: f64,

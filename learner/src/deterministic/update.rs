@@ -82,7 +82,7 @@ pub struct DeterministicNets {
 }
 
 /// What one update measured.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DeterministicStats {
     /// Critic loss, mean Q and mean target over the kept rows.
     pub critic: DistanceCriticStats,

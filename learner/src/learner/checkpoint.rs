@@ -26,8 +26,10 @@
 //! - Taken between φ rounds only ([`CheckpointError::RoundActive`]): a round's sampling state
 //!   is not saved, so the φ store is thawed and holds no staged run when one is written.
 //! - Not saved (by design): the open episodes of the ingest (a resumed run starts new
-//!   episodes; chunks of old ones are counted as lost), the last update's loss statistics
-//!   (SAC and SI) and timing telemetry (metrics only).
+//!   episodes; chunks of old ones are counted as lost) and timing telemetry (metrics only).
+//!   The latest SAC, φ and SI statistics are saved (`state.json`, `telemetry`), so that the
+//!   metrics after a resume are those of an uninterrupted run; a checkpoint without them (an
+//!   older build, or a value that was not finite) restores them as zeros.
 //!
 //! Extension: a new piece of state adds one [`Part`] to [`PARTS`] — a file name, a function
 //! that serialises it and one that restores it into a fresh learner.
@@ -46,10 +48,14 @@ pub use ckpt::{checksum, FileEntry};
 
 use super::{IngestStats, Learner, PublishState};
 use crate::adam::{Adam, AdamState};
+use crate::deterministic::DeterministicStats;
 use crate::error::LearnerError;
 use crate::ingest::Episodes;
+use crate::phi::losses::TripletStats;
 use crate::phi::store::StoreStats;
 use crate::replay::{Column, Ring};
+use crate::sac::SacStats;
+use crate::si::losses::SiLossStats;
 use crate::si::{SiBuffer, SiBufferParts, SiStats};
 use nets::TaskDims;
 
@@ -747,6 +753,86 @@ struct State {
     max_policy_lag: u64,
     sampling_rng: Pcg64Mcg,
     phi: PhiSaved,
+    /// The latest statistics the metrics show (absent in checkpoints of older builds, and when
+    /// a value was not finite, as JSON has no NaN: then they restart from zero).
+    #[serde(default)]
+    telemetry: Option<TelemetrySaved>,
+}
+
+/// The latest update, φ step and SI step statistics and the telemetry counters: what the
+/// metrics show until the next update of each kind, saved so that a resumed serial run writes
+/// the same metrics as an uninterrupted one.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TelemetrySaved {
+    low: SacStats,
+    low_deterministic: DeterministicStats,
+    high: SacStats,
+    skipped_nonfinite_low: u64,
+    skipped_nonfinite_high: u64,
+    last_policy_lag: u64,
+    phi_triplet: TripletStats,
+    phi_stable_loss: f64,
+    si_high: SiLossStats,
+    si_low: SiLossStats,
+    si_usable_fraction: f64,
+    si_low_usable_fraction: f64,
+    si_via_frontier_fraction: f64,
+}
+
+impl TelemetrySaved {
+    /// `None` when a value is not finite (JSON would write it as `null` and refuse it back).
+    fn of(l: &Learner) -> Option<TelemetrySaved> {
+        let t = &l.telemetry;
+        let (_, _, _, phi) = l.phi.checkpoint_parts();
+        let si = l.si.stats();
+        let saved = TelemetrySaved {
+            low: t.low,
+            low_deterministic: t.low_deterministic,
+            high: t.high,
+            skipped_nonfinite_low: t.skipped_nonfinite_low,
+            skipped_nonfinite_high: t.skipped_nonfinite_high,
+            last_policy_lag: t.last_policy_lag,
+            phi_triplet: phi.triplet,
+            phi_stable_loss: phi.stable_loss,
+            si_high: si.high,
+            si_low: si.low,
+            si_usable_fraction: si.usable_fraction,
+            si_low_usable_fraction: si.low_usable_fraction,
+            si_via_frontier_fraction: si.via_frontier_fraction,
+        };
+        // Left out (`"telemetry": null` in the file) rather than written as an unreadable file.
+        let finite = serde_json::to_value(&saved).is_ok_and(|v| !has_null(&v));
+        finite.then_some(saved)
+    }
+
+    fn apply(self, l: &mut Learner) {
+        let t = &mut l.telemetry;
+        t.low = self.low;
+        t.low_deterministic = self.low_deterministic;
+        t.high = self.high;
+        t.skipped_nonfinite_low = self.skipped_nonfinite_low;
+        t.skipped_nonfinite_high = self.skipped_nonfinite_high;
+        t.last_policy_lag = self.last_policy_lag;
+        let (_, _, _, phi) = l.phi.restore_parts();
+        phi.triplet = self.phi_triplet;
+        phi.stable_loss = self.phi_stable_loss;
+        let si = l.si.stats_mut();
+        si.high = self.si_high;
+        si.low = self.si_low;
+        si.usable_fraction = self.si_usable_fraction;
+        si.low_usable_fraction = self.si_low_usable_fraction;
+        si.via_frontier_fraction = self.si_via_frontier_fraction;
+    }
+}
+
+fn has_null(value: &serde_json::Value) -> bool {
+    match value {
+        serde_json::Value::Null => true,
+        serde_json::Value::Array(items) => items.iter().any(has_null),
+        serde_json::Value::Object(map) => map.values().any(has_null),
+        _ => false,
+    }
 }
 
 /// [`IngestStats`] as saved.
@@ -827,6 +913,7 @@ impl State {
             schedule: l.schedule.counters(),
             max_policy_lag: l.telemetry.max_policy_lag,
             sampling_rng: l.rng.clone(),
+            telemetry: TelemetrySaved::of(l),
             phi: PhiSaved {
                 rng: phi_rng.clone(),
                 next_round,
@@ -891,6 +978,9 @@ impl State {
         stats.steps = f.steps;
         stats.round_start_loss = f.round_start_loss;
         stats.round_end_loss = f.round_end_loss;
+        if let Some(telemetry) = self.telemetry {
+            telemetry.apply(l);
+        }
         Ok(())
     }
 }

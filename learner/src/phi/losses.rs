@@ -17,7 +17,7 @@ use candle_core::{Tensor, D};
 use crate::error::LearnerError;
 
 /// Triplet-loss statistics (batch means).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TripletStats {
     /// The loss `mean_b l_b`.
     pub loss: f64,

@@ -19,7 +19,7 @@ use candle_core::Tensor;
 use crate::error::LearnerError;
 
 /// Statistics of a critic loss.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CriticStats {
     /// L_Q (sum of the twin MSEs).
     pub loss: f64,
@@ -32,7 +32,7 @@ pub struct CriticStats {
 }
 
 /// Statistics of an actor loss.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ActorStats {
     /// L_π.
     pub loss: f64,

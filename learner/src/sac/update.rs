@@ -77,7 +77,7 @@ impl SacBatch {
 }
 
 /// What one update measured.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SacStats {
     /// Critic loss and Q statistics.
     pub critic: CriticStats,

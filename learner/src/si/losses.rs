@@ -15,7 +15,7 @@ use candle_core::Tensor;
 use crate::error::LearnerError;
 
 /// What an SI loss measured.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SiLossStats {
     /// The weighted loss (α·mse or β·mse).
     pub loss: f64,

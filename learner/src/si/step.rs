@@ -226,6 +226,11 @@ impl SelfImitation {
         &self.stats
     }
 
+    /// The counters and latest statistics, for a checkpoint restore.
+    pub(crate) fn stats_mut(&mut self) -> &mut SiStats {
+        &mut self.stats
+    }
+
     /// SI rounds due and not yet run.
     pub fn pending(&self) -> u64 {
         self.pending

@@ -1,0 +1,202 @@
+//! Bit-exact serial resume (issue #7): a serial-mode run stopped after M episodes and resumed in
+//! the same folder ends with exactly the same `metrics.jsonl` and `eval.jsonl` as an
+//! uninterrupted run of N episodes with the same seed.
+//!
+//! The stops are deterministic: a launch with `run.max_episodes = M`, then, in the same folder,
+//! launches with larger values (the run-length knobs may change on resume). The smoke config's
+//! 2 actors run 100-step episodes in 50-step chunks, so both end an episode every second round
+//! and an even M falls between two episodes of each actor. The stops are spread over φ rounds,
+//! explore, frontier-reaching and self-imitation episodes and evaluations, so all of their
+//! state must come back. Each launch runs the real binary in a temporary folder under a
+//! watchdog.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// Upper bound for one launch on a loaded 2-core machine; past it the launch is killed.
+const WATCHDOG: Duration = Duration::from_secs(300);
+/// Episodes of the uninterrupted run.
+const N_EPISODES: u64 = 24;
+/// Where the interrupted runs stop, one launch each, before a last launch to [`N_EPISODES`]
+/// (even numbers: both actors end an episode every second round). The first launch of each
+/// chain starts fresh, the others resume. Stops at 4 and 16 fall right after a φ round (the
+/// next metrics line still shows that round's statistics), 10 just as self-imitation starts,
+/// 18 right after an evaluation.
+const STOP_CHAINS: [&[u64]; 2] = [&[4, 16], &[10, 18]];
+/// A unique folder under the temp dir, removed at the end of the test.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(test: &str) -> TempDir {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos();
+        let dir = std::env::temp_dir().join(format!(
+            "asi-serial-resume-{test}-{}-{nanos}",
+            std::process::id()
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        TempDir(dir)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// `asi train --serial` on the smoke config in `run_dir` for `max_episodes`, killed at the
+/// watchdog; panics unless it exits 0.
+fn serial_train(run_dir: &Path, max_episodes: u64, extra: &[String]) -> Output {
+    let mut args = vec![
+        "train".to_owned(),
+        "--serial".to_owned(),
+        "--config".to_owned(),
+        "configs/smoke.toml".to_owned(),
+        "--run-dir".to_owned(),
+        run_dir.to_string_lossy().into_owned(),
+        "--set".to_owned(),
+        format!("run.max_episodes={max_episodes}"),
+    ];
+    args.extend(extra.iter().cloned());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_asi"))
+        .args(&args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > WATCHDOG {
+            let _ = child.kill();
+            panic!("watchdog: `asi {}` ran past {WATCHDOG:?}", args.join(" "));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let output = child.wait_with_output().unwrap();
+    assert!(
+        output.status.success(),
+        "`asi {}` failed: {}\n{}",
+        args.join(" "),
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+fn lines(path: &Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .map(str::to_owned)
+        .collect()
+}
+
+fn episodes_of(line: &str) -> u64 {
+    let value: serde_json::Value = serde_json::from_str(line).unwrap();
+    value["learner/ingest/episodes_completed"].as_f64().unwrap() as u64
+}
+
+/// The keys whose values differ between two metrics lines, with both values.
+fn differing_keys(a: &str, b: &str) -> Vec<String> {
+    let a: serde_json::Map<String, serde_json::Value> = serde_json::from_str(a).unwrap();
+    let b: serde_json::Map<String, serde_json::Value> = serde_json::from_str(b).unwrap();
+    let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
+    keys.sort();
+    keys.dedup();
+    keys.into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| format!("{k}: {:?} vs {:?}", a.get(k), b.get(k)))
+        .collect()
+}
+
+/// Asserts that the two files' lines are equal, naming the first line that differs and, for
+/// metrics lines, the keys that differ in it.
+fn assert_same_lines(what: &str, uninterrupted: &[String], resumed: &[String]) {
+    for (i, (a, b)) in uninterrupted.iter().zip(resumed).enumerate() {
+        assert!(
+            a == b,
+            "{what}: line {} differs (uninterrupted vs resumed): {:#?}",
+            i + 1,
+            differing_keys(a, b)
+        );
+    }
+    assert_eq!(
+        uninterrupted.len(),
+        resumed.len(),
+        "{what}: the runs wrote different numbers of lines"
+    );
+}
+
+/// Launches `asi train --serial` in `dir` once per stop of `stops`, then once to
+/// [`N_EPISODES`]; checks that each launch ended where it should and that every launch after
+/// the first resumed.
+fn run_chain(dir: &Path, stops: &[u64]) {
+    for (i, &episodes) in stops.iter().chain([&N_EPISODES]).enumerate() {
+        let output = serial_train(dir, episodes, &[]);
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert_eq!(
+            stdout.contains("resuming from checkpoint"),
+            i > 0,
+            "launch {i} of {stops:?}: only launches after the first resume: {stdout}"
+        );
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(
+            stderr.contains("bit-exact resume"),
+            i > 0,
+            "launch {i} of {stops:?}: a resume restores the serial state exactly: {stderr}"
+        );
+        let written = lines(&dir.join("metrics.jsonl"));
+        assert_eq!(
+            written.last().map(|l| episodes_of(l)),
+            Some(episodes),
+            "launch {i} of {stops:?} should stop at {episodes} episodes"
+        );
+    }
+}
+
+#[test]
+fn a_serial_run_stopped_and_resumed_ends_with_the_metrics_of_an_uninterrupted_one() {
+    let tmp = TempDir::new("exact");
+    let start = Instant::now();
+    let whole = tmp.0.join("whole");
+    run_chain(&whole, &[]);
+    let expected = lines(&whole.join("metrics.jsonl"));
+    let expected_eval = lines(&whole.join("eval.jsonl"));
+    assert_eq!(
+        expected.len() as u64,
+        N_EPISODES / 2,
+        "one metrics line per round in which both actors end an episode, none repeated"
+    );
+    assert_eq!(
+        expected_eval.len(),
+        4,
+        "evaluations at 6, 12, 18 and 24 episodes"
+    );
+    for stops in STOP_CHAINS {
+        let split = tmp.0.join(format!("split-{stops:?}"));
+        run_chain(&split, stops);
+        let what = format!("stopped at {stops:?}");
+        assert_same_lines(
+            &format!("metrics.jsonl, {what}"),
+            &expected,
+            &lines(&split.join("metrics.jsonl")),
+        );
+        assert_same_lines(
+            &format!("eval.jsonl, {what}"),
+            &expected_eval,
+            &lines(&split.join("eval.jsonl")),
+        );
+    }
+    eprintln!(
+        "compared {} metrics lines and {} evaluations ({N_EPISODES} episodes) against runs \
+         stopped at {STOP_CHAINS:?} and resumed, in {:.1} s",
+        expected.len(),
+        expected_eval.len(),
+        start.elapsed().as_secs_f64()
+    );
+}
