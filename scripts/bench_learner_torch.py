@@ -22,6 +22,12 @@ What is timed, exactly as on the Rust side:
   one Adam step (lr 1e-4).
 Batches are drawn once (8 of them, cycled) with the noise, so sampling is not timed. The rate of
 a block is updates / wall seconds; the figure is the median over the blocks after a warm-up.
+
+With --serve the script times on request instead, so the Rust bench can alternate candle and
+PyTorch blocks and take the ratio of neighbouring blocks (robust to load that changes during
+the run): it builds the three workloads, runs --warmup calls of each, prints one JSON line
+{"torch": version, "threads": n}, then for each stdin line "<low|high|phi> <calls>" prints
+{"what": ..., "per_sec": ...} after timing that many calls; "quit" or end of input exits.
 """
 
 import argparse
@@ -29,6 +35,7 @@ import copy
 import json
 import math
 import statistics
+import sys
 import time
 
 import torch
@@ -145,7 +152,7 @@ def time_blocks(step, warmup, blocks, per_block):
     return rates
 
 
-def bench_level(args, head, tail, action_dim, scale):
+def level_step(args, head, tail, action_dim, scale):
     g = torch.Generator().manual_seed(0)
     level = SacLevel(head, tail, action_dim, scale, args.hidden)
     batches = [make_batch(g, args.batch, head, tail, action_dim, scale)
@@ -156,10 +163,15 @@ def bench_level(args, head, tail, action_dim, scale):
         level.update(batches[i[0] % N_BATCHES])
         i[0] += 1
 
+    return step
+
+
+def bench_level(args, head, tail, action_dim, scale):
+    step = level_step(args, head, tail, action_dim, scale)
     return time_blocks(step, args.warmup, args.blocks, args.updates_per_block)
 
 
-def bench_phi(args):
+def phi_step(args):
     g = torch.Generator().manual_seed(1)
     obs_dim, b = 29, args.phi_batch
     phi = nn.Sequential(nn.Linear(obs_dim, 100), nn.ReLU(), nn.Linear(100, 100), nn.ReLU(),
@@ -185,8 +197,39 @@ def bench_phi(args):
         loss.backward()
         opt.step()
 
+    return step
+
+
+def bench_phi(args):
     per_block = max(1, args.phi_steps // args.blocks)
-    return time_blocks(step, args.warmup, args.blocks, per_block)
+    return time_blocks(phi_step(args), args.warmup, args.blocks, per_block)
+
+
+def serve(args):
+    steps = {
+        "low": level_step(args, head=31, tail=2, action_dim=8, scale=16.0),
+        "high": level_step(args, head=31, tail=0, action_dim=2, scale=10.0),
+        "phi": phi_step(args),
+    }
+    for step in steps.values():
+        for _ in range(args.warmup):
+            step()
+    print(json.dumps({"torch": torch.__version__, "threads": torch.get_num_threads()}),
+          flush=True)
+    for line in sys.stdin:
+        words = line.split()
+        if not words or words[0] == "quit":
+            break
+        if len(words) != 2 or words[0] not in steps or not words[1].isdigit() \
+                or int(words[1]) < 1:
+            print(json.dumps({"error": f"bad request {line.strip()!r}"}), flush=True)
+            continue
+        step, calls = steps[words[0]], int(words[1])
+        start = time.perf_counter()
+        for _ in range(calls):
+            step()
+        print(json.dumps({"what": words[0],
+                          "per_sec": calls / (time.perf_counter() - start)}), flush=True)
 
 
 def main():
@@ -199,8 +242,13 @@ def main():
     p.add_argument("--phi-steps", type=int, default=2000)
     p.add_argument("--phi-batch", type=int, default=100)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--serve", action="store_true",
+                   help="time blocks on request from stdin (see the module doc)")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
+    if args.serve:
+        serve(args)
+        return
     low = bench_level(args, head=31, tail=2, action_dim=8, scale=16.0)
     high = bench_level(args, head=31, tail=0, action_dim=2, scale=10.0)
     phi = bench_phi(args)

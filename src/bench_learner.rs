@@ -10,13 +10,20 @@
 //!   input `[obs 29, goal 2]` = 31, 2 actions (scale 10), critic input 33.
 //! - One φ step (SPEC §6.3, digest §4): encoder 29 → 100 → 100 → 2 on anchors, positives,
 //!   negatives and regularisation states (batch 100 each, one forward of 400 rows), the code's
-//!   triplet loss plus 0.001 × the stable loss against a frozen copy, one Adam step (lr 1e-4).
-//!   The learner has no φ trainer yet, so the loss is written here ([`phi_loss`]). A round is
-//!   50,000 steps; `--phi-steps` are timed and the round time is extrapolated from their median
-//!   rate (pass `--phi-steps 50000` to time a whole round).
+//!   triplet loss plus 0.001 × the stable loss against a frozen copy, one Adam step (lr 1e-4),
+//!   through the learner's own [`learner::phi::phi_objective`] and [`learner::phi::phi_optimizer`]
+//!   (which also read back the loss statistics the learner logs; the PyTorch side does not).
+//!   Batch sampling from the φ store is not timed. A round is 50,000 steps; `--phi-steps` are
+//!   timed and the round time is extrapolated from their median rate (pass `--phi-steps 50000`
+//!   to time a whole round).
 //!
 //! Batches (and the policy noise) are drawn once, 8 of them cycled, so replay sampling is not
-//! timed. A figure is the median over `--blocks` timed blocks after `--warmup` untimed calls.
+//! timed. After `--warmup` untimed calls on each side, the bench alternates: for each of
+//! `--blocks` blocks and each workload, one candle block and one PyTorch block (the script runs
+//! as a server, `--serve`, and times a block on request), candle first on even blocks and
+//! PyTorch first on odd ones. A rate is the median over the blocks; the ratio is the median of
+//! the per-block-pair ratios, so load that changes during the run (this is a shared 2-core
+//! machine) moves both sides of a pair alike instead of one side of the whole comparison.
 //!
 //! FLOPs ([`update_flops`], [`phi_step_flops`]) count the matrix products an update needs, at
 //! 2 FLOPs per multiply–add: every forward product; the weight gradient of every layer that is
@@ -27,18 +34,21 @@
 //!
 //! Peak ([`CorePeak`]): nominal frequency (from the CPU model name, else `cpu MHz`) × FLOPs per
 //! cycle of one core's FMA units: with AVX-512 two 512-bit FMA ports (16 f32 lanes × 2 FLOPs ×
-//! 2 = 64 FLOPs/cycle; Xeon Gold/Platinum class, an assumption: some parts have one port), with
-//! AVX2 + FMA two 256-bit ports (32 FLOPs/cycle). The AVX2 figure is printed too because candle
+//! 2 = 64 FLOPs/cycle; Xeon Gold/Platinum class and AMD Zen 5, an assumption: some Intel parts
+//! have one port), except AMD Zen 4 (family 25), which runs AVX-512 on two 256-bit FMA pipes;
+//! with AVX2 + FMA two 256-bit ports (32 FLOPs/cycle). The AVX2 figure is printed too because candle
 //! 0.11's CPU matmul (the `gemm` crate, built without its `x86-v4` feature) uses the AVX2/FMA
 //! kernels only.
 
+use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 use std::time::Instant;
 
 use anyhow::{bail, ensure, Context};
 use candle_core::{DType, Device, Tensor};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarMap};
+use candle_nn::{Optimizer, VarMap};
+use learner::phi::{phi_objective, phi_optimizer};
 use learner::sac::{SacBatch, SacLevel, SacNets, SacParams};
 use nets::weights::vars_under;
 use nets::{seeded_var_builder, Encoder, GaussianPolicy, LinearInit, TwinCritic};
@@ -206,6 +216,9 @@ pub struct CorePeak {
     pub ghz: f64,
     /// Whether the core has AVX-512F.
     pub avx512: bool,
+    /// Whether its FMA pipes are 512 bits wide (AVX-512F and not AMD family 25, Zen 4, whose
+    /// AVX-512 instructions run as two 256-bit halves).
+    pub fma512: bool,
     /// Whether it has AVX2 and FMA.
     pub avx2_fma: bool,
 }
@@ -231,17 +244,20 @@ impl CorePeak {
                     / 1000.0
             }
         };
+        let zen4 = field("vendor_id").as_deref() == Some("AuthenticAMD")
+            && field("cpu family").as_deref() == Some("25");
         Ok(Self {
             model,
             ghz,
             avx512: has("avx512f"),
+            fma512: has("avx512f") && !zen4,
             avx2_fma: has("avx2") && has("fma"),
         })
     }
 
     /// f32 FLOPs per cycle of the widest FMA units (two ports assumed).
     pub fn flops_per_cycle(&self) -> f64 {
-        if self.avx512 {
+        if self.fma512 {
             64.0
         } else {
             self.avx2_flops_per_cycle()
@@ -286,25 +302,16 @@ pub fn median(values: &[f64]) -> f64 {
     }
 }
 
-/// Calls per second of `step` in each of `blocks` blocks of `per_block` calls, after `warmup`.
-fn time_blocks(
-    warmup: usize,
-    blocks: usize,
-    per_block: usize,
-    mut step: impl FnMut() -> anyhow::Result<()>,
-) -> anyhow::Result<Vec<f64>> {
-    for _ in 0..warmup {
+/// One timed workload: a call runs one update (or φ step).
+type Step = Box<dyn FnMut() -> anyhow::Result<()>>;
+
+/// Calls per second of `calls` calls of `step`.
+fn time_calls(step: &mut Step, calls: usize) -> anyhow::Result<f64> {
+    let start = Instant::now();
+    for _ in 0..calls {
         step()?;
     }
-    let mut rates = Vec::with_capacity(blocks);
-    for _ in 0..blocks {
-        let start = Instant::now();
-        for _ in 0..per_block {
-            step()?;
-        }
-        rates.push(per_block as f64 / start.elapsed().as_secs_f64());
-    }
-    Ok(rates)
+    Ok(calls as f64 / start.elapsed().as_secs_f64())
 }
 
 /// `[rows, cols]` uniform in `[lo, hi)`.
@@ -387,55 +394,27 @@ fn build_level(shape: &LevelShape) -> anyhow::Result<SacLevel> {
     Ok(SacLevel::new(shape.name, nets, params)?)
 }
 
-/// Updates per second of `shape`, one rate per block.
-fn bench_level(args: &BenchLearnerArgs, shape: &LevelShape) -> anyhow::Result<Vec<f64>> {
+/// One SAC update of `shape` per call, cycling through pre-drawn batches.
+fn level_step(args: &BenchLearnerArgs, shape: &LevelShape) -> anyhow::Result<Step> {
     let mut level = build_level(shape)?;
     let mut rng = StdRng::seed_from_u64(0);
     let batches = (0..N_BATCHES)
         .map(|_| random_batch(&mut rng, shape, args.batch))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let name = shape.name;
     let mut i = 0;
-    time_blocks(args.warmup, args.blocks, args.updates_per_block, || {
+    Ok(Box::new(move || {
         let (batch, next_eps, eps) = &batches[i % N_BATCHES];
         i += 1;
         level
             .update(batch, next_eps, eps)
-            .with_context(|| format!("{} update", shape.name))?;
+            .with_context(|| format!("{name} update"))?;
         Ok(())
-    })
+    }))
 }
 
-/// The φ loss of HESS's code (digest §4): with `z = φ([anchor; positive; negative; reg])` in
-/// four blocks of `batch` rows and `z_old = φ_old(reg)`,
-/// `mean(mean_d (za − zp)² + relu(1 − mean_d (za − zn)²)) + coeff · mean (zr − z_old)²`.
-pub fn phi_loss(z: &Tensor, z_old: &Tensor, batch: usize, coeff: f64) -> anyhow::Result<Tensor> {
-    ensure!(
-        z.dims().len() == 2 && z.dims()[0] == 4 * batch,
-        "phi_loss: z must be [4·{batch}, d], got {:?}",
-        z.dims()
-    );
-    ensure!(
-        z_old.dims() == [batch, z.dims()[1]],
-        "phi_loss: z_old must be [{batch}, {}], got {:?}",
-        z.dims()[1],
-        z_old.dims()
-    );
-    let block = |k: usize| z.narrow(0, k * batch, batch);
-    let (za, zp, zn, zr) = (block(0)?, block(1)?, block(2)?, block(3)?);
-    let pos = za.sub(&zp)?.sqr()?.mean(1)?;
-    let neg = za
-        .sub(&zn)?
-        .sqr()?
-        .mean(1)?
-        .affine(-1.0, PHI_MARGIN)?
-        .relu()?;
-    let triplet = pos.add(&neg)?.mean_all()?;
-    let stable = zr.sub(&z_old.detach())?.sqr()?.mean_all()?;
-    Ok(triplet.add(&stable.affine(coeff, 0.0)?)?)
-}
-
-/// φ steps per second, one rate per block.
-fn bench_phi(args: &BenchLearnerArgs) -> anyhow::Result<Vec<f64>> {
+/// One φ step per call, cycling through pre-drawn states.
+fn phi_step(args: &BenchLearnerArgs) -> anyhow::Result<Step> {
     let device = Device::Cpu;
     let (vm, old_vm) = (VarMap::new(), VarMap::new());
     let (obs_dim, hidden, latent) = (PHI_DIMS[0], [PHI_DIMS[1], PHI_DIMS[2]], PHI_DIMS[3]);
@@ -451,84 +430,147 @@ fn bench_phi(args: &BenchLearnerArgs) -> anyhow::Result<Vec<f64>> {
         &hidden,
         latent,
     )?;
-    let params = ParamsAdamW {
-        lr: PHI_LR,
-        weight_decay: 0.0,
-        ..ParamsAdamW::default()
-    };
-    let mut opt = AdamW::new(vm.all_vars(), params)?;
+    let mut opt = phi_optimizer(vm.all_vars(), PHI_LR)?;
     let b = args.phi_batch;
     let mut rng = StdRng::seed_from_u64(1);
     let states = (0..N_BATCHES)
         .map(|_| normal(&mut rng, 4 * b, obs_dim))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut i = 0;
-    let per_block = (args.phi_steps / args.blocks).max(1);
-    time_blocks(args.warmup, args.blocks, per_block, || {
+    Ok(Box::new(move || {
         let x = &states[i % N_BATCHES];
         i += 1;
-        let z = phi.forward(x)?;
-        let z_old = phi_old.forward(&x.narrow(0, 3 * b, b)?)?;
-        let loss = phi_loss(&z, &z_old, b, PHI_STABLE_COEFF)?;
-        opt.backward_step(&loss)?;
+        let objective = phi_objective(&phi, x, b, PHI_MARGIN, Some((&phi_old, PHI_STABLE_COEFF)))?;
+        opt.backward_step(&objective.loss)?;
         Ok(())
-    })
+    }))
 }
 
-/// What the PyTorch script reported.
+/// The PyTorch script's first line in `--serve` mode.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
-pub struct TorchReport {
+pub struct TorchHello {
     /// `torch.__version__`.
     pub torch: String,
     /// `torch.get_num_threads()`.
     pub threads: usize,
-    /// Median low-level updates/s.
-    pub low_updates_per_sec: f64,
-    /// Median high-level updates/s.
-    pub high_updates_per_sec: f64,
-    /// Median φ steps/s.
-    pub phi_steps_per_sec: f64,
 }
 
-/// Runs the PyTorch script with the same sizes; `Ok(None)` (with the reason printed) when the
-/// venv is absent.
-fn run_torch(args: &BenchLearnerArgs) -> anyhow::Result<Option<TorchReport>> {
-    if args.no_torch {
-        println!("torch: skipped (--no-torch)");
-        return Ok(None);
+/// The script's answer to one timing request.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(untagged)]
+pub enum TorchBlock {
+    /// Calls per second of the requested workload.
+    Timed {
+        /// The workload (`low`, `high`, `phi`).
+        what: String,
+        /// Its rate.
+        per_sec: f64,
+    },
+    /// The script refused the request.
+    Refused {
+        /// Why.
+        error: String,
+    },
+}
+
+/// Parses one line of the script's output as `T`, naming the line in the error.
+pub fn parse_torch_line<T: serde::de::DeserializeOwned>(line: &str) -> anyhow::Result<T> {
+    serde_json::from_str(line.trim())
+        .with_context(|| format!("parsing the torch script's line `{}`", line.trim()))
+}
+
+/// `scripts/bench_learner_torch.py --serve`: the same workloads in PyTorch, timed on request.
+struct TorchServer {
+    child: Child,
+    stdin: ChildStdin,
+    stdout: BufReader<ChildStdout>,
+    hello: TorchHello,
+}
+
+impl TorchServer {
+    /// Starts the script (it warms its workloads up before answering); `Ok(None)` with the
+    /// reason printed when the venv is absent or `--no-torch` was given.
+    fn start(args: &BenchLearnerArgs) -> anyhow::Result<Option<Self>> {
+        if args.no_torch {
+            println!("torch: skipped (--no-torch)");
+            return Ok(None);
+        }
+        if !args.python.exists() {
+            println!(
+                "torch: skipped: {} not found; create it with scripts/bench_learner_torch_setup.sh",
+                args.python.display()
+            );
+            return Ok(None);
+        }
+        let mut child = Command::new(&args.python)
+            .arg(&args.torch_script)
+            .arg("--serve")
+            .args(torch_flags(args))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .with_context(|| format!("starting {}", args.python.display()))?;
+        let (Some(stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
+            bail!("the torch script's pipes were not opened");
+        };
+        let mut server = Self {
+            child,
+            stdin,
+            stdout: BufReader::new(stdout),
+            hello: TorchHello {
+                torch: String::new(),
+                threads: 0,
+            },
+        };
+        server.hello = parse_torch_line(&server.read_line()?)?;
+        Ok(Some(server))
     }
-    if !args.python.exists() {
-        println!(
-            "torch: skipped: {} not found; create it with scripts/bench_learner_torch_setup.sh",
-            args.python.display()
-        );
-        return Ok(None);
+
+    fn read_line(&mut self) -> anyhow::Result<String> {
+        let mut line = String::new();
+        let n = self
+            .stdout
+            .read_line(&mut line)
+            .context("reading the torch script's output")?;
+        if n == 0 {
+            let status = self.child.wait().context("waiting for the torch script")?;
+            bail!("the torch script ended ({status}) before answering; see its stderr above");
+        }
+        Ok(line)
     }
-    let output = Command::new(&args.python)
-        .arg(&args.torch_script)
-        .args(torch_flags(args))
-        .output()
-        .with_context(|| format!("running {}", args.python.display()))?;
-    if !output.status.success() {
-        bail!(
-            "{} {} failed ({}): {}",
-            args.python.display(),
-            args.torch_script.display(),
-            output.status,
-            String::from_utf8_lossy(&output.stderr)
-        );
+
+    /// Calls per second of `calls` calls of workload `what` in PyTorch.
+    fn time(&mut self, what: &str, calls: usize) -> anyhow::Result<f64> {
+        writeln!(self.stdin, "{what} {calls}").context("writing to the torch script")?;
+        self.stdin.flush().context("writing to the torch script")?;
+        match parse_torch_line::<TorchBlock>(&self.read_line()?)? {
+            TorchBlock::Timed { what: got, per_sec } if got == what => Ok(per_sec),
+            TorchBlock::Timed { what: got, .. } => {
+                bail!("asked the torch script for `{what}`, it timed `{got}`")
+            }
+            TorchBlock::Refused { error } => bail!("the torch script refused: {error}"),
+        }
     }
-    parse_torch_output(&String::from_utf8_lossy(&output.stdout)).map(Some)
+}
+
+impl Drop for TorchServer {
+    fn drop(&mut self) {
+        // Best effort: the script exits on `quit`; if it cannot be told, it is killed.
+        if writeln!(self.stdin, "quit")
+            .and_then(|()| self.stdin.flush())
+            .is_err()
+        {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
 }
 
 fn torch_flags(args: &BenchLearnerArgs) -> Vec<String> {
     [
         ("--batch", args.batch),
         ("--phi-batch", args.phi_batch),
-        ("--blocks", args.blocks),
-        ("--updates-per-block", args.updates_per_block),
         ("--warmup", args.warmup),
-        ("--phi-steps", args.phi_steps),
         ("--threads", 1),
     ]
     .iter()
@@ -536,56 +578,65 @@ fn torch_flags(args: &BenchLearnerArgs) -> Vec<String> {
     .collect()
 }
 
-/// The JSON object on the last non-empty line of the script's stdout.
-pub fn parse_torch_output(stdout: &str) -> anyhow::Result<TorchReport> {
-    let line = stdout
-        .lines()
-        .rev()
-        .find(|l| !l.trim().is_empty())
-        .context("the torch script printed nothing")?;
-    serde_json::from_str(line).with_context(|| format!("parsing the torch script's line `{line}`"))
-}
-
-/// One measured rate with its FLOPs per call.
+/// One workload's measurements: a rate per block on each side and the per-block ratios.
 struct Figure {
-    name: String,
-    per_sec: f64,
+    name: &'static str,
+    /// The workload's name in the torch script's protocol.
+    what: &'static str,
     flops: u64,
+    calls_per_block: usize,
+    candle: Vec<f64>,
+    torch: Vec<f64>,
 }
 
 impl Figure {
-    fn gflops(&self) -> f64 {
-        self.per_sec * self.flops as f64 / 1e9
+    /// candle over PyTorch of each block pair (neighbouring blocks, so both saw the same load).
+    fn ratios(&self) -> Vec<f64> {
+        self.candle
+            .iter()
+            .zip(&self.torch)
+            .map(|(c, t)| c / t)
+            .collect()
     }
 }
 
-fn print_figure(fig: &Figure, peak: &CorePeak, torch: Option<f64>) {
-    let gflops = fig.gflops();
-    println!("{}_candle_per_sec: {:.1}", fig.name, fig.per_sec);
+fn print_figure(fig: &Figure, peak: &CorePeak) {
+    let gflops = |rate: f64| rate * fig.flops as f64 / 1e9;
+    let candle = median(&fig.candle);
+    println!("{}_candle_per_sec: {candle:.1}", fig.name);
     println!("{}_flops_per_call: {}", fig.name, fig.flops);
     println!(
         "{}_candle_gflops: {:.2} ({:.1} % of the core's {:.0} GFLOP/s peak, {:.1} % of its AVX2 peak {:.0})",
         fig.name,
-        gflops,
-        100.0 * gflops / peak.peak_gflops(),
+        gflops(candle),
+        100.0 * gflops(candle) / peak.peak_gflops(),
         peak.peak_gflops(),
-        100.0 * gflops / peak.avx2_peak_gflops(),
+        100.0 * gflops(candle) / peak.avx2_peak_gflops(),
         peak.avx2_peak_gflops()
     );
-    if let Some(torch) = torch {
-        let torch_gflops = torch * fig.flops as f64 / 1e9;
-        println!("{}_torch_per_sec: {torch:.1}", fig.name);
-        println!(
-            "{}_torch_gflops: {torch_gflops:.2} ({:.1} % of peak)",
-            fig.name,
-            100.0 * torch_gflops / peak.peak_gflops()
-        );
-        println!(
-            "{}_ratio_candle_over_torch: {:.3}",
-            fig.name,
-            fig.per_sec / torch
-        );
+    if fig.torch.is_empty() {
+        return;
     }
+    let torch = median(&fig.torch);
+    println!("{}_torch_per_sec: {torch:.1}", fig.name);
+    println!(
+        "{}_torch_gflops: {:.2} ({:.1} % of peak)",
+        fig.name,
+        gflops(torch),
+        100.0 * gflops(torch) / peak.peak_gflops()
+    );
+    let ratios = fig.ratios();
+    let (lo, hi) = ratios
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+            (lo.min(r), hi.max(r))
+        });
+    println!(
+        "{}_ratio_candle_over_torch: {:.3} (median of {} block pairs, range {lo:.3}–{hi:.3})",
+        fig.name,
+        median(&ratios),
+        ratios.len()
+    );
 }
 
 fn check_args(args: &BenchLearnerArgs) -> anyhow::Result<()> {
@@ -616,10 +667,10 @@ pub fn run(args: &BenchLearnerArgs) -> anyhow::Result<()> {
         "core_peak_gflops: {:.0} ({} FLOPs/cycle{}); avx2_peak_gflops: {:.0}",
         peak.peak_gflops(),
         peak.flops_per_cycle(),
-        if peak.avx512 {
-            ", AVX-512, two FMA ports assumed"
-        } else {
-            ""
+        match (peak.avx512, peak.fma512) {
+            (true, true) => ", AVX-512, two 512-bit FMA ports assumed",
+            (true, false) => ", AVX-512 on two 256-bit FMA pipes (AMD Zen 4)",
+            _ => "",
         },
         peak.avx2_peak_gflops()
     );
@@ -627,46 +678,73 @@ pub fn run(args: &BenchLearnerArgs) -> anyhow::Result<()> {
         "candle_threads (RAYON_NUM_THREADS): {threads}; dtype: {:?}",
         DType::F32
     );
-    let low = bench_level(args, &LevelShape::LOW)?;
-    let high = bench_level(args, &LevelShape::HIGH)?;
-    let phi = bench_phi(args)?;
-    let torch = run_torch(args)?;
-    if let Some(t) = &torch {
-        println!("torch: {} ({} thread)", t.torch, t.threads);
-    }
-    let figures = [
+    let mut steps = [
+        level_step(args, &LevelShape::LOW)?,
+        level_step(args, &LevelShape::HIGH)?,
+        phi_step(args)?,
+    ];
+    let phi_per_block = (args.phi_steps / args.blocks).max(1);
+    let mut figures = [
         (
             "low_update",
-            median(&low),
+            "low",
             update_flops(&LevelShape::LOW, args.batch),
+            args.updates_per_block,
         ),
         (
             "high_update",
-            median(&high),
+            "high",
             update_flops(&LevelShape::HIGH, args.batch),
+            args.updates_per_block,
         ),
-        ("phi_step", median(&phi), phi_step_flops(args.phi_batch)),
-    ];
-    let torch_rates = torch.as_ref().map(|t| {
-        [
-            t.low_updates_per_sec,
-            t.high_updates_per_sec,
-            t.phi_steps_per_sec,
-        ]
+        (
+            "phi_step",
+            "phi",
+            phi_step_flops(args.phi_batch),
+            phi_per_block,
+        ),
+    ]
+    .map(|(name, what, flops, calls_per_block)| Figure {
+        name,
+        what,
+        flops,
+        calls_per_block,
+        candle: Vec::with_capacity(args.blocks),
+        torch: Vec::with_capacity(args.blocks),
     });
-    for (k, (name, per_sec, flops)) in figures.iter().enumerate() {
-        let fig = Figure {
-            name: (*name).to_owned(),
-            per_sec: *per_sec,
-            flops: *flops,
-        };
-        print_figure(&fig, &peak, torch_rates.map(|t| t[k]));
+    for step in &mut steps {
+        time_calls(step, args.warmup)?;
+    }
+    let mut torch = TorchServer::start(args)?;
+    if let Some(t) = &torch {
+        println!("torch: {} ({} thread)", t.hello.torch, t.hello.threads);
+    }
+    // Blocks alternate between the two sides, candle first on even blocks and PyTorch first on
+    // odd ones, so a load change during the run shifts both sides of a pair alike.
+    for block in 0..args.blocks {
+        for (fig, step) in figures.iter_mut().zip(&mut steps) {
+            let mut side = |candle_side: bool| -> anyhow::Result<()> {
+                match (candle_side, torch.as_mut()) {
+                    (true, _) => fig.candle.push(time_calls(step, fig.calls_per_block)?),
+                    (false, Some(t)) => fig.torch.push(t.time(fig.what, fig.calls_per_block)?),
+                    (false, None) => {}
+                }
+                Ok(())
+            };
+            side(block % 2 == 0)?;
+            side(block % 2 == 1)?;
+        }
+    }
+    drop(torch);
+    for fig in &figures {
+        print_figure(fig, &peak);
     }
     let round = |rate: f64| PHI_ROUND_STEPS as f64 / rate;
-    if let Some(t) = torch_rates {
-        println!("phi_round_torch_secs: {:.1}", round(t[2]));
+    let phi = &figures[2];
+    if !phi.torch.is_empty() {
+        println!("phi_round_torch_secs: {:.1}", round(median(&phi.torch)));
     }
-    println!("phi_round_candle_secs: {:.1}", round(figures[2].1));
+    println!("phi_round_candle_secs: {:.1}", round(median(&phi.candle)));
     Ok(())
 }
 
@@ -723,33 +801,53 @@ mod tests {
         let amd = "model name\t: AMD EPYC 7B13\ncpu MHz\t\t: 3000.000\nflags\t\t: avx2 fma\n";
         let peak = CorePeak::parse(amd).unwrap();
         assert_eq!((peak.ghz, peak.peak_gflops()), (3.0, 96.0));
+        // Zen 4 (family 25) has AVX-512 but 256-bit FMA pipes; Zen 5 (family 26) 512-bit ones.
+        let zen = |family: u32| {
+            format!(
+                "vendor_id\t: AuthenticAMD\ncpu family\t: {family}\nmodel name\t: AMD EPYC\n\
+                 cpu MHz\t\t: 2600.000\nflags\t\t: avx2 fma avx512f\n"
+            )
+        };
+        let zen4 = CorePeak::parse(&zen(25)).unwrap();
+        assert!(zen4.avx512 && !zen4.fma512);
+        assert_eq!(zen4.peak_gflops(), 2.6 * 32.0);
+        assert_eq!(CorePeak::parse(&zen(26)).unwrap().peak_gflops(), 2.6 * 64.0);
         assert!(CorePeak::parse("model name\t: mystery\n").is_err());
     }
 
     #[test]
-    fn phi_loss_matches_a_hand_computed_value() {
-        // batch 1, d 2: za (0,0), zp (1,1) → mean_d 1; zn (0.5,0.5) → mean_d 0.25 → relu(0.75);
-        // zr (2,0), z_old (0,0) → mean 2. Loss = 1 + 0.75 + 0.1 · 2 = 1.95.
-        let z = Tensor::from_slice(&[0f32, 0., 1., 1., 0.5, 0.5, 2., 0.], (4, 2), &Device::Cpu)
-            .unwrap();
-        let z_old = Tensor::zeros((1, 2), DType::F32, &Device::Cpu).unwrap();
-        let loss = phi_loss(&z, &z_old, 1, 0.1)
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap();
-        assert!((loss - 1.95).abs() < 1e-6, "{loss}");
-        assert!(phi_loss(&z, &z_old, 2, 0.1).is_err());
+    fn the_torch_lines_are_parsed_and_a_bad_line_is_an_error() {
+        let hello: TorchHello =
+            parse_torch_line("{\"torch\": \"2.15.0\", \"threads\": 1}\n").unwrap();
+        assert_eq!(hello.threads, 1);
+        assert_eq!(hello.torch, "2.15.0");
+        let block: TorchBlock = parse_torch_line("{\"what\": \"low\", \"per_sec\": 10.5}").unwrap();
+        assert_eq!(
+            block,
+            TorchBlock::Timed {
+                what: "low".into(),
+                per_sec: 10.5
+            }
+        );
+        let refused: TorchBlock = parse_torch_line("{\"error\": \"bad request\"}").unwrap();
+        assert!(matches!(refused, TorchBlock::Refused { .. }));
+        assert!(parse_torch_line::<TorchHello>("").is_err());
+        assert!(parse_torch_line::<TorchBlock>("not json").is_err());
+        assert!(parse_torch_line::<TorchBlock>("{\"what\": \"low\"}").is_err());
     }
 
     #[test]
-    fn the_torch_line_is_parsed_and_a_bad_line_is_an_error() {
-        let out = "warning\n{\"torch\": \"2.15.0\", \"threads\": 1, \"low_updates_per_sec\": 10.5, \
-                   \"high_updates_per_sec\": 12.0, \"phi_steps_per_sec\": 70.0, \"low_block_rates\": []}\n";
-        let report = parse_torch_output(out).unwrap();
-        assert_eq!(report.low_updates_per_sec, 10.5);
-        assert_eq!(report.threads, 1);
-        assert!(parse_torch_output("").is_err());
-        assert!(parse_torch_output("not json\n").is_err());
+    fn ratios_pair_neighbouring_blocks() {
+        let fig = Figure {
+            name: "low_update",
+            what: "low",
+            flops: 1,
+            calls_per_block: 1,
+            candle: vec![10.0, 30.0, 20.0],
+            torch: vec![5.0, 60.0, 20.0],
+        };
+        assert_eq!(fig.ratios(), vec![2.0, 0.5, 1.0]);
+        assert_eq!(median(&fig.ratios()), 1.0);
     }
 
     #[test]
