@@ -11,7 +11,7 @@
 //! watchdog.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 /// Upper bound for one launch on a loaded 2-core machine; past it the launch is killed.
@@ -51,6 +51,12 @@ impl Drop for TempDir {
 /// `asi train --serial` on the smoke config in `run_dir` for `max_episodes`, killed at the
 /// watchdog; panics unless it exits 0.
 fn serial_train(run_dir: &Path, max_episodes: u64, extra: &[String]) -> Output {
+    let (child, args) = spawn_serial(run_dir, max_episodes, extra);
+    wait_success(child, &args)
+}
+
+/// Starts `asi train --serial` (see [`serial_train`]); returns the child and its arguments.
+fn spawn_serial(run_dir: &Path, max_episodes: u64, extra: &[String]) -> (Child, Vec<String>) {
     let mut args = vec![
         "train".to_owned(),
         "--serial".to_owned(),
@@ -62,13 +68,18 @@ fn serial_train(run_dir: &Path, max_episodes: u64, extra: &[String]) -> Output {
         format!("run.max_episodes={max_episodes}"),
     ];
     args.extend(extra.iter().cloned());
-    let mut child = Command::new(env!("CARGO_BIN_EXE_asi"))
+    let child = Command::new(env!("CARGO_BIN_EXE_asi"))
         .args(&args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    (child, args)
+}
+
+/// Waits for `child` under the watchdog; panics unless it exits 0.
+fn wait_success(mut child: Child, args: &[String]) -> Output {
     let start = Instant::now();
     while child.try_wait().unwrap().is_none() {
         if start.elapsed() > WATCHDOG {
@@ -135,9 +146,9 @@ fn assert_same_lines(what: &str, uninterrupted: &[String], resumed: &[String]) {
 /// Launches `asi train --serial` in `dir` once per stop of `stops`, then once to
 /// [`N_EPISODES`]; checks that each launch ended where it should and that every launch after
 /// the first resumed.
-fn run_chain(dir: &Path, stops: &[u64]) {
+fn run_chain(dir: &Path, stops: &[u64], extra: &[String]) {
     for (i, &episodes) in stops.iter().chain([&N_EPISODES]).enumerate() {
-        let output = serial_train(dir, episodes, &[]);
+        let output = serial_train(dir, episodes, extra);
         let stdout = String::from_utf8_lossy(&output.stdout);
         assert_eq!(
             stdout.contains("resuming from checkpoint"),
@@ -149,6 +160,11 @@ fn run_chain(dir: &Path, stops: &[u64]) {
             stderr.contains("bit-exact resume"),
             i > 0,
             "launch {i} of {stops:?}: a resume restores the serial state exactly: {stderr}"
+        );
+        let n_written = stderr.matches("serial checkpoint written").count();
+        assert!(
+            n_written >= if extra.is_empty() { 1 } else { 2 },
+            "launch {i} of {stops:?}: {n_written} serial checkpoints written"
         );
         let written = lines(&dir.join("metrics.jsonl"));
         assert_eq!(
@@ -164,7 +180,7 @@ fn a_serial_run_stopped_and_resumed_ends_with_the_metrics_of_an_uninterrupted_on
     let tmp = TempDir::new("exact");
     let start = Instant::now();
     let whole = tmp.0.join("whole");
-    run_chain(&whole, &[]);
+    run_chain(&whole, &[], &[]);
     let expected = lines(&whole.join("metrics.jsonl"));
     let expected_eval = lines(&whole.join("eval.jsonl"));
     assert_eq!(
@@ -177,9 +193,18 @@ fn a_serial_run_stopped_and_resumed_ends_with_the_metrics_of_an_uninterrupted_on
         4,
         "evaluations at 6, 12, 18 and 24 episodes"
     );
-    for stops in STOP_CHAINS {
+    for (k, stops) in STOP_CHAINS.into_iter().enumerate() {
         let split = tmp.0.join(format!("split-{stops:?}"));
-        run_chain(&split, stops);
+        // The second chain also writes timed checkpoints at every round boundary where no
+        // episode is open: they must not change the run.
+        let extra = match k {
+            0 => vec![],
+            _ => vec![
+                "--set".to_owned(),
+                "run.checkpoint_interval_mins=1e-6".to_owned(),
+            ],
+        };
+        run_chain(&split, stops, &extra);
         let what = format!("stopped at {stops:?}");
         assert_same_lines(
             &format!("metrics.jsonl, {what}"),
@@ -192,11 +217,105 @@ fn a_serial_run_stopped_and_resumed_ends_with_the_metrics_of_an_uninterrupted_on
             &lines(&split.join("eval.jsonl")),
         );
     }
+    let signalled = stop_by_signal_and_resume(&tmp.0.join("signal"));
+    assert_same_lines(
+        &format!("metrics.jsonl, stopped by SIGINT at {signalled} episodes"),
+        &expected,
+        &lines(&tmp.0.join("signal").join("metrics.jsonl")),
+    );
+    assert_same_lines(
+        "eval.jsonl, stopped by SIGINT",
+        &expected_eval,
+        &lines(&tmp.0.join("signal").join("eval.jsonl")),
+    );
     eprintln!(
         "compared {} metrics lines and {} evaluations ({N_EPISODES} episodes) against runs \
-         stopped at {STOP_CHAINS:?} and resumed, in {:.1} s",
+         stopped at {STOP_CHAINS:?} and at {signalled} (SIGINT) and resumed, in {:.1} s",
         expected.len(),
         expected_eval.len(),
         start.elapsed().as_secs_f64()
+    );
+}
+
+/// A launch to [`N_EPISODES`] stopped by SIGINT once its first metrics lines are on disk
+/// (wherever that falls: the stop waits for the open episodes), then resumed to the end;
+/// returns the episodes at which it stopped.
+fn stop_by_signal_and_resume(dir: &Path) -> u64 {
+    let (child, args) = spawn_serial(dir, N_EPISODES, &[]);
+    let metrics = dir.join("metrics.jsonl");
+    let start = Instant::now();
+    while std::fs::metadata(&metrics).map_or(true, |m| m.len() == 0) {
+        assert!(start.elapsed() < WATCHDOG, "watchdog: no metrics line");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // SAFETY: kill(2) on the pid of a child we spawned and have not waited for.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    let output = wait_success(child, &args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("stopped by signal"),
+        "the launch should stop on SIGINT: {stderr}"
+    );
+    let stopped = lines(&metrics).last().map_or(0, |l| episodes_of(l));
+    assert!(
+        stopped < N_EPISODES && stopped % 2 == 0,
+        "the signal should stop the run between episodes before its end: {stopped}"
+    );
+    let resumed = serial_train(dir, N_EPISODES, &[]);
+    assert!(
+        String::from_utf8_lossy(&resumed.stderr).contains("bit-exact resume"),
+        "the launch after the signal resumes exactly"
+    );
+    stopped
+}
+
+/// Launches `asi train --serial` expecting a failure; returns its stderr.
+fn serial_train_fails(run_dir: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "train",
+        "--serial",
+        "--config",
+        "configs/smoke.toml",
+        "--run-dir",
+        run_dir.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    let output = Command::new(env!("CARGO_BIN_EXE_asi"))
+        .args(&args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(
+        !output.status.success(),
+        "`asi {}` should fail",
+        args.join(" ")
+    );
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+#[test]
+fn a_serial_checkpoint_of_other_actors_or_a_corrupt_one_is_refused_with_a_clear_error() {
+    let tmp = TempDir::new("refused");
+    let dir = tmp.0.join("run");
+    serial_train(&dir, 2, &[]);
+    let metrics_before = lines(&dir.join("metrics.jsonl"));
+    let err = serial_train_fails(&dir, &["--actors", "1", "--set", "run.max_episodes=4"]);
+    assert!(
+        err.contains("serial checkpoint") && err.contains("(actors, seed, task)"),
+        "{err}"
+    );
+    let state = dir.join("checkpoints/serial/ckpt-000001/state.json");
+    let mut bytes = std::fs::read(&state).unwrap();
+    bytes[10] ^= 0x20;
+    std::fs::write(&state, &bytes).unwrap();
+    let err = serial_train_fails(&dir, &["--set", "run.max_episodes=4"]);
+    assert!(
+        err.contains("state.json") && err.contains("checksum"),
+        "{err}"
+    );
+    assert_eq!(
+        lines(&dir.join("metrics.jsonl")),
+        metrics_before,
+        "a refused resume writes nothing"
     );
 }
