@@ -98,6 +98,16 @@ fn a_restored_learner_writes_the_same_files_and_trains_on_exactly_like_the_origi
     assert_eq!(restored.ingest_stats(), original.ingest_stats());
     assert_eq!(restored.run_schedule(), original.run_schedule());
     assert_eq!(restored.phi_stats().rounds, original.phi_stats().rounds);
+    // The metrics show the latest SAC, φ and SI statistics until the next update of each
+    // kind; they come back too (timings aside).
+    let untimed = |l: &Learner| -> Vec<(&'static str, f64)> {
+        l.metrics()
+            .into_iter()
+            .filter(|(n, _)| !n.contains("per_sec"))
+            .collect()
+    };
+    assert!(losses(&original).iter().any(|(_, v)| *v != 0.0));
+    assert_eq!(untimed(&restored), untimed(&original));
     for i in 0..original.low_replay().ring().len() {
         let (a, b) = (original.low_replay().get(i), restored.low_replay().get(i));
         assert_eq!(
