@@ -137,6 +137,9 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     install_stop_handlers();
     let mut stopped = false;
     let mut waiting_logged = false;
+    // Whether the graph holds every stored state (it was rebuilt after the last chunk, or
+    // restored, which rebuilds it from the whole store): only then is a resume bit-exact.
+    let mut graph_current = true;
     while !budget_reached(config, &learner) {
         for (actor, line) in actors.iter_mut().zip(&mut actor_lines) {
             catch_up(&mut learner)?;
@@ -147,10 +150,13 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             graph.ingest(&chunk.header, &chunk.records)?;
         }
         catch_up(&mut learner)?;
+        let version_before = graph.stats().graph_version;
         eval.on_weights(
             &ctx,
             broadcast_weights(&mut learner, &mut actors, &mut graph)?,
         )?;
+        // A rebuild after this round's chunks: the graph holds every stored state.
+        graph_current = graph.stats().graph_version != version_before;
         self_imitate(&mut learner, &mut graph)?;
         let episodes = learner.ingest_stats().episodes_completed;
         if episodes != last_episodes {
@@ -196,7 +202,9 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
                         eval: &mut eval,
                         coverage: &mut coverage,
                     };
-                    if let Err(err) = parts.save(&serial_dir, config, &learner, &graph) {
+                    if let Err(err) =
+                        parts.save(&serial_dir, config, &learner, &graph, graph_current)
+                    {
                         tracing::error!("writing the serial checkpoint failed: {err:#}");
                     }
                 }
@@ -231,7 +239,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         eval: &mut eval,
         coverage: &mut coverage,
     }
-    .save(&serial_dir, config, &learner, &graph)
+    .save(&serial_dir, config, &learner, &graph, graph_current)
     .context("writing the final serial checkpoint")?;
     picture.draw_if_behind(&graph);
     let env_steps = learner.progress().env_steps_ingested;
@@ -263,6 +271,7 @@ impl SerialLoop<'_> {
         config: &protocol::Config,
         learner: &Learner,
         graph: &GraphService,
+        graph_current: bool,
     ) -> anyhow::Result<()> {
         let clock = std::time::Instant::now();
         let Some((header, bytes)) = &self.eval.last_weights else {
@@ -279,16 +288,17 @@ impl SerialLoop<'_> {
                 .map(|grid| (grid.counts().to_vec(), grid.n_outside())),
             weights: checkpoint::SavedHeader::of(header),
         };
-        let moment = (
-            learner.progress().env_steps_ingested,
-            graph.stats().stored_steps,
-        );
-        let path = checkpoint::write(dir, config, &state, bytes, moment)?;
+        let moment = checkpoint::Moment {
+            learner_env_steps: learner.progress().env_steps_ingested,
+            graph_stored_steps: graph.stats().stored_steps,
+            graph_current,
+        };
+        let (path, manifest) = checkpoint::write(dir, config, &state, bytes, moment)?;
         tracing::info!(
             secs = clock.elapsed().as_secs_f64(),
-            exact = state.actors.iter().all(|a| !a.had_open_episode),
-            "serial checkpoint written to {}",
-            path.display()
+            "serial checkpoint written to {} ({})",
+            path.display(),
+            manifest.exactness()
         );
         Ok(())
     }
@@ -341,14 +351,14 @@ impl SerialLoop<'_> {
                 manifest.learner_env_steps,
                 manifest.graph_stored_steps
             );
-        } else if !manifest.exact {
+        } else if !manifest.exact() {
             tracing::warn!(
-                "serial checkpoint {} was written with open episodes: they are lost and the \
-                 resume is not bit-exact",
-                path.display()
+                "serial checkpoint {}: {}",
+                path.display(),
+                manifest.exactness()
             );
         }
-        let exact = matched && manifest.exact;
+        let exact = matched && manifest.exact();
         tracing::info!(
             "serial state restored from {}: {}",
             path.display(),
@@ -558,10 +568,18 @@ fn write_line(
             object.insert(format!("actor{i}/{name}"), serde_json::json!(value));
         }
     }
-    object.insert(
-        "graph-service/graph/stored_steps".to_owned(),
-        serde_json::json!(graph.stats().stored_steps),
-    );
+    // Not `graph/version`: a restored graph-service counts its rebuild as one more version.
+    let g = graph.stats();
+    for (name, value) in [
+        ("stored_steps", g.stored_steps),
+        ("nodes", g.n_nodes as u64),
+        ("edges", g.n_edges as u64),
+    ] {
+        object.insert(
+            format!("graph-service/graph/{name}"),
+            serde_json::json!(value),
+        );
+    }
     for (name, value) in eval {
         object.insert(format!("evaluator0/{name}"), serde_json::json!(value));
     }

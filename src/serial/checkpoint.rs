@@ -13,9 +13,13 @@
 //!
 //! Invariants:
 //! - Atomic and checked as the other parts (the `ckpt` crate); the newest [`KEEP`] are kept.
-//! - Exact only between episodes: serial mode writes it at a round boundary where no actor
-//!   has an open episode ([`Manifest::exact`]); one written with open episodes (a run ended by
-//!   its env-step budget) restores as if those episodes had been abandoned.
+//! - Exact only between episodes and with a current graph ([`Manifest::exact`]): serial mode
+//!   writes it at a round boundary where no actor has an open episode; one written with open
+//!   episodes (a run ended by its env-step budget) restores as if those episodes had been
+//!   abandoned. The graph-service's checkpoint does not save its graph but rebuilds it on
+//!   restore from the whole store, while between φ versions a running graph-service keeps the
+//!   graph of its last rebuild: so a restore is exact only when the graph held every stored
+//!   state, i.e. at the round of a φ re-map ([`Manifest::graph_current`]).
 //! - Matched: the manifest's learner env steps and graph stored steps must equal those of the
 //!   restored learner and graph-service, else the parts are from different moments (a write
 //!   interrupted between them) and the resume is not exact (logged).
@@ -62,8 +66,12 @@ pub struct Manifest {
     pub learner_env_steps: u64,
     /// States the graph-service stored when it was written.
     pub graph_stored_steps: u64,
-    /// No actor had an open episode: a restore continues bit-exactly.
-    pub exact: bool,
+    /// Actors that had an open episode (lost on restore).
+    pub n_open_episodes: u32,
+    /// The graph held every stored state (it was rebuilt after the last chunk). Otherwise the
+    /// restored graph-service, which rebuilds its graph from the whole store, answers from a
+    /// graph that already holds the newer states, unlike the uninterrupted run's.
+    pub graph_current: bool,
     /// Every other file of the folder.
     pub files: Vec<FileEntry>,
 }
@@ -107,6 +115,39 @@ impl SavedHeader {
     }
 }
 
+impl Manifest {
+    /// A restore continues bit-exactly: no open episode, and the graph held every state.
+    pub fn exact(&self) -> bool {
+        self.n_open_episodes == 0 && self.graph_current
+    }
+
+    /// Whether a restore is bit-exact, and if not why, in words.
+    pub fn exactness(&self) -> String {
+        match (self.n_open_episodes, self.graph_current) {
+            (0, true) => "a resume from it is bit-exact".to_owned(),
+            (0, false) => "a resume from it is not bit-exact: the graph-service rebuilds its \
+                           graph with the states stored since its last rebuild"
+                .to_owned(),
+            (n, _) => format!(
+                "a resume from it is not bit-exact: {n} open episodes are lost{}",
+                if self.graph_current {
+                    ""
+                } else {
+                    ", and the graph-service rebuilds its graph with newer states"
+                }
+            ),
+        }
+    }
+}
+
+/// When a serial checkpoint is written, to match it with the learner and graph-service and
+/// to tell whether a restore is exact.
+pub struct Moment {
+    pub learner_env_steps: u64,
+    pub graph_stored_steps: u64,
+    pub graph_current: bool,
+}
+
 /// `state.json`: the serial loop's own state at a round boundary.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -139,8 +180,8 @@ pub fn write(
     config: &protocol::Config,
     state: &SerialState,
     bytes: &[u8],
-    (learner_env_steps, graph_stored_steps): (u64, u64),
-) -> anyhow::Result<PathBuf> {
+    moment: Moment,
+) -> anyhow::Result<(PathBuf, Manifest)> {
     let mut folder = TmpFolder::begin(dir, PREFIX, TMP_PREFIX)?;
     folder.add(STATE_FILE, &serde_json::to_vec_pretty(state)?)?;
     folder.add(WEIGHTS_FILE, bytes)?;
@@ -150,12 +191,14 @@ pub fn write(
         n_actors: config.run.n_actors as u32,
         seed: config.run.seed,
         task: config.env.task.clone(),
-        learner_env_steps,
-        graph_stored_steps,
-        exact: state.actors.iter().all(|a| !a.had_open_episode),
+        learner_env_steps: moment.learner_env_steps,
+        graph_stored_steps: moment.graph_stored_steps,
+        n_open_episodes: state.actors.iter().filter(|a| a.had_open_episode).count() as u32,
+        graph_current: moment.graph_current,
         files: folder.files().to_vec(),
     };
-    Ok(folder.commit(MANIFEST, &serde_json::to_vec_pretty(&manifest)?, KEEP)?)
+    let path = folder.commit(MANIFEST, &serde_json::to_vec_pretty(&manifest)?, KEEP)?;
+    Ok((path, manifest))
 }
 
 /// The newest serial checkpoint in `dir`, checked against `config` (see the module doc);
