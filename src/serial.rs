@@ -5,12 +5,32 @@
 //! graph-service (HESS exploration, reaching reports) by calling its request handler directly,
 //! with the same encoded messages as in process mode, and so does the learner for its
 //! self-imitation routes. Evaluations run inline when they fall due (same schedule and outputs
-//! as the evaluator process). Checkpoints (learner and graph-service) are written every
-//! `run.checkpoint_interval_mins` and at the end; SIGINT or SIGTERM ends the run after the
-//! actor round in hand with a last metrics line and a checkpoint. A resumed serial run
-//! continues the learner's and the graph-service's state; the actors start new episodes (their
-//! open episodes and RNG states are not checkpointed), so it is not
-//! bit-identical to an uninterrupted run.
+//! as the evaluator process). One metrics line is written after each round of actor chunks in
+//! which episodes completed (and a last one at the end if anything changed since).
+//!
+//! Checkpoints and resume (issue #7). A checkpoint has three parts written together: the
+//! learner's (`checkpoints/ckpt-N/`), the graph-service's (`checkpoints/graph-service/`) and
+//! the serial loop's own ([`checkpoint`], `checkpoints/serial/`: every actor's generator,
+//! episode counter and counters, the last weights broadcast, the evaluator's schedule and
+//! latest metrics, the coverage grid). They are written every `run.checkpoint_interval_mins`
+//! and at the end, always at a round boundary where no actor has an open episode, so no
+//! environment or rollout state needs saving: when the interval has passed, or SIGINT/SIGTERM
+//! arrives, the loop lets the open episodes finish first (logged), then writes the checkpoint
+//! (a signal: the last metrics line and the checkpoint, exit 0). Checkpoints only read state,
+//! so a run's metrics do not depend on when they fall.
+//!
+//! A resumed serial run (same folder, `run.max_episodes` or `run.max_env_steps` may grow)
+//! restores all three parts and continues bit-identically to an uninterrupted run with the same
+//! seed — same `metrics.jsonl` and `eval.jsonl` lines (`tests/serial_resume.rs`) — when the
+//! checkpoint was written (a) between episodes and (b) in a round whose broadcast re-mapped the
+//! graph-service to a new φ. (b) is because the graph-service's checkpoint does not save its
+//! graph: a restore rebuilds it from the whole store, while a running graph-service keeps the
+//! graph of its last re-map until the next one; the restored graph would hold the states stored
+//! since, and answer routes and frontiers from them earlier than the uninterrupted run. (a)
+//! fails only at the end of a run stopped by its env-step budget mid-episode: the open
+//! episodes are lost. The serial manifest records both, and a resume logs whether it is
+//! bit-exact and, if not, why. The graph-service's `graph/version` is one higher after a
+//! restore (its rebuild), so it is not in the serial metrics lines.
 
 use std::io::{BufWriter, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -36,8 +56,9 @@ mod checkpoint;
 /// Updates per `train` call while catching up with the replay ratio.
 const UPDATE_BURST: usize = 64;
 
-/// Set by SIGINT or SIGTERM: the loop stops after the actor round in hand, writes its last
-/// metrics line and a checkpoint, and exits 0 (as process mode does on a signal).
+/// Set by SIGINT or SIGTERM: the loop stops at the first round boundary with no open episode,
+/// writes its last metrics line and a checkpoint, and exits 0 (as process mode does on a
+/// signal).
 static STOP_REQUESTED: AtomicBool = AtomicBool::new(false);
 
 extern "C" fn request_stop(_signal: libc::c_int) {
