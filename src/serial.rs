@@ -16,7 +16,8 @@
 //! and at the end, always at a round boundary where no actor has an open episode, so no
 //! environment or rollout state needs saving: when the interval has passed, or SIGINT/SIGTERM
 //! arrives, the loop lets the open episodes finish first (logged), then writes the checkpoint
-//! (a signal: the last metrics line and the checkpoint, exit 0). Checkpoints only read state,
+//! (a signal: the last metrics line and the checkpoint, exit 0). A timed checkpoint also waits
+//! for the next φ re-map (see below), at most one more interval. Checkpoints only read state,
 //! so a run's metrics do not depend on when they fall.
 //!
 //! A resumed serial run (same folder, `run.max_episodes` or `run.max_env_steps` may grow)
@@ -198,14 +199,23 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         // depend on when they fall.
         let stop = STOP_REQUESTED.load(Ordering::Relaxed);
         if stop || checkpoints.is_due() {
-            if actors.iter().any(Actor::has_open_episode) {
+            let idle = !actors.iter().any(Actor::has_open_episode);
+            // A timed checkpoint also waits for a φ re-map, so that a resume from it is exact,
+            // but no longer than one more interval; a stop does not wait for it.
+            let ready = idle && (stop || graph_current || checkpoints.is_overdue());
+            if !ready {
                 if !waiting_logged {
                     tracing::info!(
-                        "{}: letting the open episodes finish first",
+                        "{}: {}",
                         if stop {
                             "stop requested"
                         } else {
                             "checkpoint due"
+                        },
+                        if idle {
+                            "waiting for the next φ re-map (at most one more interval)"
+                        } else {
+                            "letting the open episodes finish first"
                         }
                     );
                     waiting_logged = true;
