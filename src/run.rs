@@ -207,12 +207,6 @@ impl CheckpointTimer {
         self.last.elapsed() >= self.interval
     }
 
-    /// Whether a second interval has passed since the last checkpoint (serial mode stops
-    /// waiting for a better moment).
-    pub fn is_overdue(&self) -> bool {
-        self.last.elapsed() >= self.interval * 2
-    }
-
     /// Writes a checkpoint if one is due and no φ round runs; a failed write is logged and
     /// retried at the next interval (training goes on). True when one was written.
     pub fn tick(&mut self, ctx: &RunContext, learner: &Learner) -> bool {

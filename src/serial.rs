@@ -42,17 +42,19 @@ use anyhow::{bail, Context};
 use graph_service::GraphService;
 use learner::Learner;
 use protocol::graph::{GraphRequestHeader, GraphResponseHeader};
-use protocol::ActorId;
+use protocol::{ActorId, TrajectoryHeader};
 
 use crate::maze_graph_png::{MazeGraphPlot, REDRAW_EPISODES};
 use crate::proc::actor::{actor_metrics, ReachMeans};
 use crate::proc::common::{task_info, CoverageTracker, GraphRoutes};
 use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
-use crate::proc::graph_service::{open_service, Checkpoints};
+use crate::proc::graph_service::open_service;
 use crate::run::RunContext;
 use crate::weights_file::WeightsSaver;
 
 mod checkpoint;
+
+use checkpoint::GraphInput;
 
 /// Updates per `train` call while catching up with the replay ratio.
 const UPDATE_BURST: usize = 64;
@@ -96,8 +98,13 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     };
     let mut learner = crate::run::open_learner(&ctx, dims, task.episode_length)?;
     let graph_dir = ctx.checkpoint_dir().join(graph_service::checkpoint::SUBDIR);
-    let (mut graph, start) = open_service(&ctx, &graph_dir, dims)?;
-    let mut graph_checkpoints = Checkpoints::new(graph_dir, config.run.checkpoint_interval_mins);
+    let (service, start) = open_service(&ctx, &graph_dir, dims)?;
+    let base = start
+        .restored_from
+        .as_ref()
+        .and_then(|p| p.file_name())
+        .map(|n| n.to_string_lossy().into_owned());
+    let mut graph = LoggedGraph::new(service, graph_dir, base);
     tracing::info!(
         restored_stored_steps = start.restored_stored_steps,
         "serial graph-service {}",
@@ -132,7 +139,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         coverage: &mut coverage,
     };
     let exact = match saved {
-        Some(saved) => loop_state.restore(saved, &learner, &graph)?,
+        Some(saved) => loop_state.restore(saved, &learner, &mut graph)?,
         None => {
             if ctx.resume {
                 tracing::warn!(
@@ -149,8 +156,11 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     if !exact {
         eval.on_weights(
             &ctx,
-            broadcast_weights(&mut learner, &mut actors, &mut graph)?,
+            broadcast_weights(&mut learner, &mut actors, &mut graph.service)?,
         )?;
+        // This graph-service (fresh, or restored, which rebuilds its graph) is what a restore
+        // of its checkpoint gives back: a base for the input log.
+        graph.write_base();
     }
     let mut last_episodes = learner.ingest_stats().episodes_completed;
     // Env steps at the last metrics line of this run (an exact resume had just written one).
@@ -159,9 +169,6 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     install_stop_handlers();
     let mut stopped = false;
     let mut waiting_logged = false;
-    // Whether the graph holds every stored state (it was rebuilt after the last chunk, or
-    // restored, which rebuilds it from the whole store): only then is a resume bit-exact.
-    let mut graph_current = true;
     while !budget_reached(config, &learner) {
         for (actor, line) in actors.iter_mut().zip(&mut actor_lines) {
             catch_up(&mut learner)?;
@@ -172,20 +179,23 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             graph.ingest(&chunk.header, &chunk.records)?;
         }
         catch_up(&mut learner)?;
-        let version_before = graph.stats().graph_version;
+        let version_before = graph.service.stats().graph_version;
         eval.on_weights(
             &ctx,
-            broadcast_weights(&mut learner, &mut actors, &mut graph)?,
+            broadcast_weights(&mut learner, &mut actors, &mut graph.service)?,
         )?;
-        // A rebuild after this round's chunks: the graph holds every stored state.
-        graph_current = graph.stats().graph_version != version_before;
+        // A φ re-map rebuilt the graph from every stored state: a restore of a checkpoint
+        // written now gives this graph back, so the input log can start over from it.
+        if graph.service.stats().graph_version != version_before {
+            graph.write_base();
+        }
         self_imitate(&mut learner, &mut graph)?;
         let episodes = learner.ingest_stats().episodes_completed;
         if episodes != last_episodes {
             write_line(
                 &mut metrics,
                 &learner,
-                &graph,
+                &graph.service,
                 &actors,
                 &mut actor_lines,
                 &eval.latest,
@@ -200,22 +210,14 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         let stop = STOP_REQUESTED.load(Ordering::Relaxed);
         if stop || checkpoints.is_due() {
             let idle = !actors.iter().any(Actor::has_open_episode);
-            // A timed checkpoint also waits for a φ re-map, so that a resume from it is exact,
-            // but no longer than one more interval; a stop does not wait for it.
-            let ready = idle && (stop || graph_current || checkpoints.is_overdue());
-            if !ready {
+            if !idle {
                 if !waiting_logged {
                     tracing::info!(
-                        "{}: {}",
+                        "{}: letting the open episodes finish first",
                         if stop {
                             "stop requested"
                         } else {
                             "checkpoint due"
-                        },
-                        if idle {
-                            "waiting for the next φ re-map (at most one more interval)"
-                        } else {
-                            "letting the open episodes finish first"
                         }
                     );
                     waiting_logged = true;
@@ -226,28 +228,25 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             } else {
                 waiting_logged = false;
                 if checkpoints.tick(&ctx, &learner) {
-                    graph_checkpoints.write(&graph);
                     let mut parts = SerialLoop {
                         actors: &mut actors,
                         lines: &mut actor_lines,
                         eval: &mut eval,
                         coverage: &mut coverage,
                     };
-                    if let Err(err) =
-                        parts.save(&serial_dir, config, &learner, &graph, graph_current)
-                    {
+                    if let Err(err) = parts.save(&serial_dir, config, &learner, &graph) {
                         tracing::error!("writing the serial checkpoint failed: {err:#}");
                     }
                 }
             }
         }
-        picture.tick(episodes, &graph);
+        picture.tick(episodes, &graph.service);
     }
     if line_at != Some(learner.progress().env_steps_ingested) {
         write_line(
             &mut metrics,
             &learner,
-            &graph,
+            &graph.service,
             &actors,
             &mut actor_lines,
             &eval.latest,
@@ -257,7 +256,6 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     metrics.flush()?;
     eval.finish();
     crate::run::final_checkpoint(&ctx, &mut learner)?;
-    graph_checkpoints.write(&graph);
     if actors.iter().any(Actor::has_open_episode) {
         tracing::warn!(
             "the run ended with open episodes: they are not saved, and a resume continues with \
@@ -270,9 +268,9 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         eval: &mut eval,
         coverage: &mut coverage,
     }
-    .save(&serial_dir, config, &learner, &graph, graph_current)
+    .save(&serial_dir, config, &learner, &graph)
     .context("writing the final serial checkpoint")?;
-    picture.draw_if_behind(&graph);
+    picture.draw_if_behind(&graph.service);
     let env_steps = learner.progress().env_steps_ingested;
     if stopped {
         tracing::info!(
@@ -301,8 +299,7 @@ impl SerialLoop<'_> {
         dir: &std::path::Path,
         config: &protocol::Config,
         learner: &Learner,
-        graph: &GraphService,
-        graph_current: bool,
+        graph: &LoggedGraph,
     ) -> anyhow::Result<()> {
         let clock = std::time::Instant::now();
         let Some((header, bytes)) = &self.eval.last_weights else {
@@ -321,8 +318,9 @@ impl SerialLoop<'_> {
         };
         let moment = checkpoint::Moment {
             learner_env_steps: learner.progress().env_steps_ingested,
-            graph_stored_steps: graph.stats().stored_steps,
-            graph_current,
+            graph_stored_steps: graph.service.stats().stored_steps,
+            graph_base: graph.base.clone(),
+            graph_log: graph.complete.then_some(&graph.log[..]),
         };
         let (path, manifest) = checkpoint::write(dir, config, &state, bytes, moment)?;
         tracing::info!(
@@ -340,14 +338,16 @@ impl SerialLoop<'_> {
         &mut self,
         saved: checkpoint::Restored,
         learner: &Learner,
-        graph: &GraphService,
+        graph: &mut LoggedGraph,
     ) -> anyhow::Result<bool> {
         let checkpoint::Restored {
             state,
             weights: (header, bytes),
             manifest,
             path,
+            graph_log,
         } = saved;
+        let replayed = graph.replay(&manifest, graph_log)?;
         let saved_lines = state.actors.into_iter().zip(state.published_steps);
         for ((actor, line), (saved, steps)) in self
             .actors
@@ -370,9 +370,9 @@ impl SerialLoop<'_> {
         self.eval.last_weights = Some((header, bytes));
         let now = (
             learner.progress().env_steps_ingested,
-            graph.stats().stored_steps,
+            graph.service.stats().stored_steps,
         );
-        let matched = now == (manifest.learner_env_steps, manifest.graph_stored_steps);
+        let matched = replayed && now == (manifest.learner_env_steps, manifest.graph_stored_steps);
         if !matched {
             tracing::warn!(
                 "serial checkpoint {} is of another moment (learner env steps, graph stored steps) \
@@ -426,7 +426,7 @@ fn catch_up(learner: &mut Learner) -> anyhow::Result<()> {
 
 /// Runs every due self-imitation round with routes from the in-process graph-service. Called
 /// after the weights broadcast, so the graph already uses the learner's φ version.
-fn self_imitate(learner: &mut Learner, graph: &mut GraphService) -> anyhow::Result<()> {
+fn self_imitate(learner: &mut Learner, graph: &mut LoggedGraph) -> anyhow::Result<()> {
     while learner.si_pending() > 0 && !learner.phi_round_active() {
         learner.train_self_imitation(&mut GraphRoutes::new(InProcessGraph(graph)))?;
     }
@@ -551,8 +551,9 @@ impl SerialPicture {
     }
 }
 
-/// The in-process graph-service as the actors' transport: its request handler, called directly.
-struct InProcessGraph<'a>(&'a mut GraphService);
+/// The in-process graph-service as the actors' transport: its request handler, called directly
+/// (and the request logged).
+struct InProcessGraph<'a>(&'a mut LoggedGraph);
 
 impl GraphTransport for InProcessGraph<'_> {
     fn call(
@@ -560,7 +561,114 @@ impl GraphTransport for InProcessGraph<'_> {
         header: &GraphRequestHeader,
         body: &[u8],
     ) -> Result<(GraphResponseHeader, Vec<u8>), String> {
-        Ok(self.0.handle(header, body))
+        self.0
+            .record(|| GraphInput::Request(*header, body.to_vec()));
+        Ok(self.0.service.handle(header, body))
+    }
+}
+
+/// Serial mode's graph-service with the log of its inputs (chunks and requests) since its
+/// *base*: the newest graph-service checkpoint, written whenever its graph holds every stored
+/// state (at start and after each φ re-map). Restoring the base and replaying the log gives
+/// back the service exactly, although the graph-service's checkpoint does not save its graph
+/// (a restore rebuilds it from the whole store, while a running service keeps the graph of its
+/// last re-map). Weights messages are not logged: between re-maps they change nothing.
+struct LoggedGraph {
+    service: GraphService,
+    /// `checkpoints/graph-service/`.
+    dir: std::path::PathBuf,
+    /// Folder name of the base checkpoint.
+    base: Option<String>,
+    log: Vec<GraphInput>,
+    /// The log holds every input since `base` (false after a failed base write, until the
+    /// next; nothing is logged meanwhile).
+    complete: bool,
+}
+
+impl LoggedGraph {
+    fn new(service: GraphService, dir: std::path::PathBuf, base: Option<String>) -> Self {
+        Self {
+            service,
+            dir,
+            complete: base.is_some(),
+            base,
+            log: Vec::new(),
+        }
+    }
+
+    fn record(&mut self, input: impl FnOnce() -> GraphInput) {
+        if self.complete {
+            self.log.push(input());
+        }
+    }
+
+    fn ingest(&mut self, header: &TrajectoryHeader, records: &[f32]) -> anyhow::Result<()> {
+        self.record(|| GraphInput::Chunk(*header, records.to_vec()));
+        Ok(self.service.ingest(header, records)?)
+    }
+
+    /// Writes a graph-service checkpoint as the new base and empties the log.
+    fn write_base(&mut self) {
+        let clock = std::time::Instant::now();
+        self.log.clear();
+        match self.service.save(&self.dir) {
+            Ok(ckpt) => {
+                tracing::info!(
+                    stored_steps = ckpt.manifest.stored_steps,
+                    secs = clock.elapsed().as_secs_f64(),
+                    "graph-service checkpoint written to {}",
+                    ckpt.path.display()
+                );
+                self.base = ckpt
+                    .path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned());
+                self.complete = true;
+            }
+            Err(err) => {
+                tracing::error!(
+                    "writing a graph-service checkpoint failed ({err}); serial checkpoints are \
+                     not bit-exact until the next φ re-map"
+                );
+                self.complete = false;
+            }
+        }
+    }
+
+    /// Replays a saved log onto the restored base; false (nothing replayed) when the restored
+    /// checkpoint is not the log's base or the log is incomplete.
+    fn replay(
+        &mut self,
+        manifest: &checkpoint::Manifest,
+        log: Vec<GraphInput>,
+    ) -> anyhow::Result<bool> {
+        if !manifest.graph_log_complete || manifest.graph_base != self.base {
+            tracing::warn!(
+                "the graph-service was restored from {:?}, the serial checkpoint's input log \
+                 starts from {:?} (complete: {}): not replayed",
+                self.base,
+                manifest.graph_base,
+                manifest.graph_log_complete
+            );
+            return Ok(false);
+        }
+        for input in &log {
+            match input {
+                GraphInput::Chunk(header, records) => self
+                    .service
+                    .ingest(header, records)
+                    .context("replaying a logged chunk into the graph-service")?,
+                GraphInput::Request(header, body) => {
+                    self.service.handle(header, body);
+                }
+            }
+        }
+        tracing::info!(
+            n_inputs = log.len(),
+            "graph-service inputs since its checkpoint replayed"
+        );
+        self.log = log;
+        Ok(true)
     }
 }
 

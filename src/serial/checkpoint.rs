@@ -31,7 +31,11 @@ use std::path::{Path, PathBuf};
 use actor::resume::ActorState;
 use anyhow::{bail, Context};
 use ckpt::{FileEntry, TmpFolder};
-use protocol::{PhiVersion, PolicyVersion, RunSchedule, WeightsHeader, PROTOCOL_VERSION};
+use protocol::graph::GraphRequestHeader;
+use protocol::{
+    ActorId, EpisodeId, PhiVersion, PolicyVersion, RunSchedule, TrajectoryFlags, TrajectoryHeader,
+    WeightsHeader, PROTOCOL_VERSION,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::proc::evaluator::EvalSchedule;
@@ -47,6 +51,8 @@ const TMP_PREFIX: &str = ".tmp-ckpt-";
 const MANIFEST: &str = "manifest.json";
 const STATE_FILE: &str = "state.json";
 const WEIGHTS_FILE: &str = "weights.safetensors";
+const LOG_INDEX_FILE: &str = "graph_log.json";
+const LOG_DATA_FILE: &str = "graph_log.bin";
 
 /// `manifest.json` of a serial checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -68,10 +74,12 @@ pub struct Manifest {
     pub graph_stored_steps: u64,
     /// Actors that had an open episode (lost on restore).
     pub n_open_episodes: u32,
-    /// The graph held every stored state (it was rebuilt after the last chunk). Otherwise the
-    /// restored graph-service, which rebuilds its graph from the whole store, answers from a
-    /// graph that already holds the newer states, unlike the uninterrupted run's.
-    pub graph_current: bool,
+    /// The graph-service checkpoint (folder name under `checkpoints/graph-service/`) the
+    /// input log starts from: the one written at the last φ re-map.
+    pub graph_base: Option<String>,
+    /// The input log holds every graph-service input since `graph_base` (false after a failed
+    /// base write: then the restored graph-service is the base's, without the later inputs).
+    pub graph_log_complete: bool,
     /// Every other file of the folder.
     pub files: Vec<FileEntry>,
 }
@@ -116,36 +124,190 @@ impl SavedHeader {
 }
 
 impl Manifest {
-    /// A restore continues bit-exactly: no open episode, and the graph held every state.
+    /// A restore continues bit-exactly: no open episode, and a complete graph input log.
     pub fn exact(&self) -> bool {
-        self.n_open_episodes == 0 && self.graph_current
+        self.n_open_episodes == 0 && self.graph_log_complete
     }
 
     /// Whether a restore is bit-exact, and if not why, in words.
     pub fn exactness(&self) -> String {
-        match (self.n_open_episodes, self.graph_current) {
-            (0, true) => "a resume from it is bit-exact".to_owned(),
-            (0, false) => "a resume from it is not bit-exact: the graph-service rebuilds its \
-                           graph with the states stored since its last rebuild"
-                .to_owned(),
-            (n, _) => format!(
-                "a resume from it is not bit-exact: {n} open episodes are lost{}",
-                if self.graph_current {
-                    ""
-                } else {
-                    ", and the graph-service rebuilds its graph with newer states"
-                }
-            ),
+        let mut problems = Vec::new();
+        if self.n_open_episodes > 0 {
+            problems.push(format!("{} open episodes are lost", self.n_open_episodes));
+        }
+        if !self.graph_log_complete {
+            problems.push(
+                "the graph-service's inputs since its last base checkpoint are not all saved"
+                    .to_owned(),
+            );
+        }
+        match problems.is_empty() {
+            true => "a resume from it is bit-exact".to_owned(),
+            false => format!("a resume from it is not bit-exact: {}", problems.join("; ")),
         }
     }
 }
 
-/// When a serial checkpoint is written, to match it with the learner and graph-service and
-/// to tell whether a restore is exact.
-pub struct Moment {
+/// When a serial checkpoint is written, to match it with the learner and graph-service, and
+/// the graph-service's input log.
+pub struct Moment<'a> {
     pub learner_env_steps: u64,
     pub graph_stored_steps: u64,
-    pub graph_current: bool,
+    pub graph_base: Option<String>,
+    /// `None` when incomplete.
+    pub graph_log: Option<&'a [GraphInput]>,
+}
+
+/// One input of the graph-service (a state machine) since its base checkpoint; replayed in
+/// order after restoring the base, they rebuild its state exactly.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GraphInput {
+    /// A trajectory chunk (`GraphService::ingest`).
+    Chunk(TrajectoryHeader, Vec<f32>),
+    /// A request (`GraphService::handle`); the answer is not kept.
+    Request(GraphRequestHeader, Vec<u8>),
+}
+
+/// `graph_log.json`: the headers of the log, field by field; payloads in `graph_log.bin`.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+enum LogEntry {
+    /// [`trajectory_fields`] and the number of f32 records values.
+    Chunk { header: Vec<u64>, n_values: u64 },
+    /// [`request_fields`] and the number of body bytes.
+    Request { header: Vec<u64>, n_bytes: u64 },
+}
+
+fn trajectory_fields(h: &TrajectoryHeader) -> Vec<u64> {
+    let small = [
+        h.actor_id.0,
+        h.chunk_index,
+        h.n_steps,
+        h.obs_dim,
+        h.action_dim,
+        h.goal_dim,
+        h.latent_dim,
+        h.flags.0,
+        h.protocol_version,
+        h.reserved,
+    ];
+    let mut fields = vec![
+        h.episode_id.0,
+        h.first_env_step,
+        h.policy_version.0,
+        h.phi_version.0,
+    ];
+    fields.extend(small.map(u64::from));
+    fields
+}
+
+fn trajectory_header(f: &[u64]) -> Result<TrajectoryHeader, String> {
+    let n = |i: usize| -> Result<u32, String> {
+        u32::try_from(f[i]).map_err(|_| format!("header field {i} = {} is not a u32", f[i]))
+    };
+    if f.len() != 14 {
+        return Err(format!("a chunk header has 14 fields, not {}", f.len()));
+    }
+    Ok(TrajectoryHeader {
+        episode_id: EpisodeId(f[0]),
+        first_env_step: f[1],
+        policy_version: PolicyVersion(f[2]),
+        phi_version: PhiVersion(f[3]),
+        actor_id: ActorId(n(4)?),
+        chunk_index: n(5)?,
+        n_steps: n(6)?,
+        obs_dim: n(7)?,
+        action_dim: n(8)?,
+        goal_dim: n(9)?,
+        latent_dim: n(10)?,
+        flags: TrajectoryFlags(n(11)?),
+        protocol_version: n(12)?,
+        reserved: n(13)?,
+    })
+}
+
+fn request_fields(h: &GraphRequestHeader) -> Vec<u64> {
+    vec![
+        h.request_id,
+        h.phi_version.0,
+        u64::from(h.kind),
+        u64::from(h.protocol_version),
+    ]
+}
+
+fn request_header(f: &[u64]) -> Result<GraphRequestHeader, String> {
+    if f.len() != 4 {
+        return Err(format!("a request header has 4 fields, not {}", f.len()));
+    }
+    let n = |i: usize| u32::try_from(f[i]).map_err(|_| format!("header field {i} is not a u32"));
+    Ok(GraphRequestHeader {
+        request_id: f[0],
+        phi_version: PhiVersion(f[1]),
+        kind: n(2)?,
+        protocol_version: n(3)?,
+    })
+}
+
+/// The log as (`graph_log.json`, `graph_log.bin`).
+fn encode_log(log: &[GraphInput]) -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
+    let mut entries = Vec::with_capacity(log.len());
+    let mut data = Vec::new();
+    for input in log {
+        match input {
+            GraphInput::Chunk(header, records) => {
+                entries.push(LogEntry::Chunk {
+                    header: trajectory_fields(header),
+                    n_values: records.len() as u64,
+                });
+                data.extend(records.iter().flat_map(|v| v.to_le_bytes()));
+            }
+            GraphInput::Request(header, body) => {
+                entries.push(LogEntry::Request {
+                    header: request_fields(header),
+                    n_bytes: body.len() as u64,
+                });
+                data.extend_from_slice(body);
+            }
+        }
+    }
+    Ok((serde_json::to_vec(&entries)?, data))
+}
+
+fn decode_log(index: &[u8], data: &[u8]) -> Result<Vec<GraphInput>, String> {
+    let entries: Vec<LogEntry> = serde_json::from_slice(index).map_err(|e| e.to_string())?;
+    let mut rest = data;
+    let mut take = |n: u64| -> Result<&[u8], String> {
+        let n = usize::try_from(n).map_err(|e| e.to_string())?;
+        if n > rest.len() {
+            return Err(format!(
+                "the log needs {n} more bytes, {} are left",
+                rest.len()
+            ));
+        }
+        let (head, tail) = rest.split_at(n);
+        rest = tail;
+        Ok(head)
+    };
+    let mut log = Vec::with_capacity(entries.len());
+    for entry in entries {
+        log.push(match entry {
+            LogEntry::Chunk { header, n_values } => {
+                let bytes = take(n_values * 4)?;
+                let values = bytes
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                    .collect();
+                GraphInput::Chunk(trajectory_header(&header)?, values)
+            }
+            LogEntry::Request { header, n_bytes } => {
+                GraphInput::Request(request_header(&header)?, take(n_bytes)?.to_vec())
+            }
+        });
+    }
+    if !rest.is_empty() {
+        return Err(format!("{} bytes after the last entry", rest.len()));
+    }
+    Ok(log)
 }
 
 /// `state.json`: the serial loop's own state at a round boundary.
@@ -172,6 +334,8 @@ pub struct Restored {
     pub weights: (WeightsHeader, Vec<u8>),
     pub manifest: Manifest,
     pub path: PathBuf,
+    /// The graph-service's inputs since `manifest.graph_base` (empty when incomplete).
+    pub graph_log: Vec<GraphInput>,
 }
 
 /// Writes `state` and the last broadcast `bytes` as the next checkpoint in `dir`.
@@ -185,6 +349,9 @@ pub fn write(
     let mut folder = TmpFolder::begin(dir, PREFIX, TMP_PREFIX)?;
     folder.add(STATE_FILE, &serde_json::to_vec_pretty(state)?)?;
     folder.add(WEIGHTS_FILE, bytes)?;
+    let (index, data) = encode_log(moment.graph_log.unwrap_or_default())?;
+    folder.add(LOG_INDEX_FILE, &index)?;
+    folder.add(LOG_DATA_FILE, &data)?;
     let manifest = Manifest {
         format_version: FORMAT_VERSION,
         protocol_version: PROTOCOL_VERSION,
@@ -194,7 +361,8 @@ pub fn write(
         learner_env_steps: moment.learner_env_steps,
         graph_stored_steps: moment.graph_stored_steps,
         n_open_episodes: state.actors.iter().filter(|a| a.had_open_episode).count() as u32,
-        graph_current: moment.graph_current,
+        graph_base: moment.graph_base,
+        graph_log_complete: moment.graph_log.is_some(),
         files: folder.files().to_vec(),
     };
     let path = folder.commit(MANIFEST, &serde_json::to_vec_pretty(&manifest)?, KEEP)?;
@@ -231,12 +399,20 @@ pub fn read_latest(dir: &Path, config: &protocol::Config) -> anyhow::Result<Opti
             manifest.n_actors
         );
     }
+    let (index, data) = (take(LOG_INDEX_FILE)?, take(LOG_DATA_FILE)?);
+    let graph_log = decode_log(&index, &data).map_err(|problem| {
+        anyhow::anyhow!(
+            "{} is corrupt: {problem}",
+            path.join(LOG_INDEX_FILE).display()
+        )
+    })?;
     let header = state.weights.header(bytes.len());
     Ok(Some(Restored {
         state,
         weights: (header, bytes),
         manifest,
         path,
+        graph_log,
     }))
 }
 
@@ -267,4 +443,44 @@ fn check_compatible(
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_graph_input_log_reads_back_as_written_and_a_short_payload_is_refused() {
+        let chunk = TrajectoryHeader {
+            episode_id: EpisodeId((3 << 40) | 7),
+            first_env_step: 50,
+            policy_version: PolicyVersion(9),
+            phi_version: PhiVersion(2),
+            actor_id: ActorId(3),
+            chunk_index: 1,
+            n_steps: 2,
+            obs_dim: 4,
+            action_dim: 2,
+            goal_dim: 2,
+            latent_dim: 2,
+            flags: TrajectoryFlags(5),
+            protocol_version: PROTOCOL_VERSION,
+            reserved: 0,
+        };
+        let request = GraphRequestHeader {
+            request_id: 11,
+            phi_version: PhiVersion(2),
+            kind: 3,
+            protocol_version: PROTOCOL_VERSION,
+        };
+        let log = vec![
+            GraphInput::Chunk(chunk, vec![1.5, -0.0, f32::MAX, f32::MIN_POSITIVE]),
+            GraphInput::Request(request, vec![0, 255, 7]),
+            GraphInput::Chunk(chunk, Vec::new()),
+        ];
+        let (index, data) = encode_log(&log).unwrap();
+        assert_eq!(decode_log(&index, &data).unwrap(), log);
+        assert!(decode_log(&index, &data[..data.len() - 1]).is_err());
+        assert!(decode_log(&index, &[data.as_slice(), &[0]].concat()).is_err());
+    }
 }
