@@ -8,30 +8,31 @@
 //! as the evaluator process). One metrics line is written after each round of actor chunks in
 //! which episodes completed (and a last one at the end if anything changed since).
 //!
-//! Checkpoints and resume (issue #7). A checkpoint has three parts written together: the
-//! learner's (`checkpoints/ckpt-N/`), the graph-service's (`checkpoints/graph-service/`) and
-//! the serial loop's own ([`checkpoint`], `checkpoints/serial/`: every actor's generator,
-//! episode counter and counters, the last weights broadcast, the evaluator's schedule and
-//! latest metrics, the coverage grid). They are written every `run.checkpoint_interval_mins`
-//! and at the end, always at a round boundary where no actor has an open episode, so no
-//! environment or rollout state needs saving: when the interval has passed, or SIGINT/SIGTERM
-//! arrives, the loop lets the open episodes finish first (logged), then writes the checkpoint
-//! (a signal: the last metrics line and the checkpoint, exit 0). A timed checkpoint also waits
-//! for the next φ re-map (see below), at most one more interval. Checkpoints only read state,
-//! so a run's metrics do not depend on when they fall.
+//! Checkpoints and resume (issue #7). A checkpoint has three parts: the learner's
+//! (`checkpoints/ckpt-N/`), the graph-service's (`checkpoints/graph-service/`) and the serial
+//! loop's own ([`checkpoint`], `checkpoints/serial/`: every actor's generator, episode counter
+//! and counters, the last weights broadcast, the evaluator's schedule and latest metrics, the
+//! coverage grid, and the graph-service's inputs since its checkpoint). The learner's and the
+//! serial part are written every `run.checkpoint_interval_mins` and at the end, always at a
+//! round boundary where no actor has an open episode, so no environment or rollout state needs
+//! saving: when the interval has passed, or SIGINT/SIGTERM arrives, the loop lets the open
+//! episodes finish first (logged), then writes the checkpoint (a signal: the last metrics line
+//! and the checkpoint, exit 0). Checkpoints only read state, so a run's metrics do not depend
+//! on when they fall.
 //!
-//! A resumed serial run (same folder, `run.max_episodes` or `run.max_env_steps` may grow)
-//! restores all three parts and continues bit-identically to an uninterrupted run with the same
-//! seed — same `metrics.jsonl` and `eval.jsonl` lines (`tests/serial_resume.rs`) — when the
-//! checkpoint was written (a) between episodes and (b) in a round whose broadcast re-mapped the
-//! graph-service to a new φ. (b) is because the graph-service's checkpoint does not save its
-//! graph: a restore rebuilds it from the whole store, while a running graph-service keeps the
-//! graph of its last re-map until the next one; the restored graph would hold the states stored
-//! since, and answer routes and frontiers from them earlier than the uninterrupted run. (a)
-//! fails only at the end of a run stopped by its env-step budget mid-episode: the open
-//! episodes are lost. The serial manifest records both, and a resume logs whether it is
-//! bit-exact and, if not, why. The graph-service's `graph/version` is one higher after a
-//! restore (its rebuild), so it is not in the serial metrics lines.
+//! The graph-service's checkpoint does not save its graph: a restore rebuilds it from the whole
+//! store, while a running service keeps the graph of its last φ re-map until the next one. So
+//! serial mode writes the graph-service's checkpoint only where the two agree — at start and
+//! in every round whose broadcast re-mapped φ (its *base*) — and logs every chunk and request
+//! it gets after that ([`LoggedGraph`]); a resume restores the base and replays the log.
+//!
+//! A resumed serial run (same folder; `run.max_episodes` or `run.max_env_steps` may grow)
+//! continues bit-identically to an uninterrupted run with the same seed — same `metrics.jsonl`
+//! and `eval.jsonl` lines (`tests/serial_resume.rs`). Not exact, and logged as such: a
+//! checkpoint written with open episodes (a run ended by its env-step budget mid-episode: they
+//! are lost), or after a failed base write (until the next φ re-map). The graph-service's
+//! `graph/version` is one higher after a restore (its rebuild), so it is not in the serial
+//! metrics lines.
 
 use std::io::{BufWriter, Write};
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -2,27 +2,23 @@
 //! learner and the graph-service (whose checkpoints sit beside it), so that a resumed serial
 //! run continues bit-exactly (issue #7).
 //!
-//! Written to `checkpoints/serial/ckpt-NNNNNN/` ([`SUBDIR`]) after the learner's and the
-//! graph-service's checkpoints of the same moment:
+//! Written to `checkpoints/serial/ckpt-NNNNNN/` ([`SUBDIR`]) after the learner's checkpoint of
+//! the same moment:
 //!
 //! | file | contents |
 //! |---|---|
 //! | `state.json` | every actor's [`ActorState`] (generator, episode counter, counters), the steps each actor published, the evaluator's schedule and latest metrics, the coverage grid, the header of the last weights broadcast |
 //! | `weights.safetensors` | the payload of the last weights broadcast (the weights the actors act with, which may be older than the learner's) |
-//! | `manifest.json` | format and protocol versions, actors, seed, task, the learner's env steps and the graph-service's stored steps when written, whether the restore is exact, size and checksum of each file above |
+//! | `graph_log.json`, `graph_log.bin` | the graph-service's inputs since its base checkpoint ([`GraphInput`]: chunk and request headers field by field; records as little-endian f32 and request bodies) |
+//! | `manifest.json` | format and protocol versions, actors, seed, task, the learner's env steps and the graph-service's stored steps when written, open episodes, the graph-service base checkpoint and whether the log is complete, size and checksum of each file above |
 //!
 //! Invariants:
 //! - Atomic and checked as the other parts (the `ckpt` crate); the newest [`KEEP`] are kept.
-//! - Exact only between episodes and with a current graph ([`Manifest::exact`]): serial mode
-//!   writes it at a round boundary where no actor has an open episode; one written with open
-//!   episodes (a run ended by its env-step budget) restores as if those episodes had been
-//!   abandoned. The graph-service's checkpoint does not save its graph but rebuilds it on
-//!   restore from the whole store, while between φ versions a running graph-service keeps the
-//!   graph of its last rebuild: so a restore is exact only when the graph held every stored
-//!   state, i.e. at the round of a φ re-map ([`Manifest::graph_current`]).
-//! - Matched: the manifest's learner env steps and graph stored steps must equal those of the
-//!   restored learner and graph-service, else the parts are from different moments (a write
-//!   interrupted between them) and the resume is not exact (logged).
+//! - Exact when [`Manifest::exact`]: written between episodes (one written with open episodes,
+//!   at a run's env-step budget, restores as if they had been abandoned), with a complete log.
+//! - Matched: the log replays onto the graph-service checkpoint it names, and the learner's env
+//!   steps and the graph's stored steps after the replay must equal the manifest's, else the
+//!   parts are of different moments and the resume is not exact (logged).
 //! - Refused with a clear error: another format or protocol version, another number of
 //!   actors, seed or task; a corrupt or truncated file.
 
