@@ -105,7 +105,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         .as_ref()
         .and_then(|p| p.file_name())
         .map(|n| n.to_string_lossy().into_owned());
-    let mut graph = LoggedGraph::new(service, graph_dir, base);
+    let mut graph = LoggedGraph::new(service, graph_dir, base, config.graph.max_stored_steps);
     tracing::info!(
         restored_stored_steps = start.restored_stored_steps,
         "serial graph-service {}",
@@ -581,26 +581,53 @@ struct LoggedGraph {
     /// Folder name of the base checkpoint.
     base: Option<String>,
     log: Vec<GraphInput>,
-    /// The log holds every input since `base` (false after a failed base write, until the
-    /// next; nothing is logged meanwhile).
+    /// Env steps of the chunks in the log.
+    logged_steps: u64,
+    /// Past this many logged env steps (`graph.max_stored_steps`: the log would outgrow the
+    /// store) the log is dropped until the next base, e.g. when φ rounds are skipped for long.
+    max_logged_steps: u64,
+    /// The log holds every input since `base` (false after a failed base write or a dropped
+    /// log, until the next base; nothing is logged meanwhile).
     complete: bool,
 }
 
 impl LoggedGraph {
-    fn new(service: GraphService, dir: std::path::PathBuf, base: Option<String>) -> Self {
+    fn new(
+        service: GraphService,
+        dir: std::path::PathBuf,
+        base: Option<String>,
+        max_logged_steps: u64,
+    ) -> Self {
         Self {
             service,
             dir,
             complete: base.is_some(),
             base,
             log: Vec::new(),
+            logged_steps: 0,
+            max_logged_steps,
         }
     }
 
     fn record(&mut self, input: impl FnOnce() -> GraphInput) {
-        if self.complete {
-            self.log.push(input());
+        if !self.complete {
+            return;
         }
+        let input = input();
+        if let GraphInput::Chunk(header, _) = &input {
+            self.logged_steps += u64::from(header.n_steps);
+        }
+        if self.logged_steps > self.max_logged_steps {
+            tracing::warn!(
+                logged_steps = self.logged_steps,
+                "the graph-service's input log outgrew graph.max_stored_steps without a φ \
+                 re-map: dropped; serial checkpoints are not bit-exact until the next re-map"
+            );
+            self.log = Vec::new();
+            self.complete = false;
+            return;
+        }
+        self.log.push(input);
     }
 
     fn ingest(&mut self, header: &TrajectoryHeader, records: &[f32]) -> anyhow::Result<()> {
@@ -612,6 +639,7 @@ impl LoggedGraph {
     fn write_base(&mut self) {
         let clock = std::time::Instant::now();
         self.log.clear();
+        self.logged_steps = 0;
         match self.service.save(&self.dir) {
             Ok(ckpt) => {
                 tracing::info!(
@@ -668,6 +696,13 @@ impl LoggedGraph {
             n_inputs = log.len(),
             "graph-service inputs since its checkpoint replayed"
         );
+        self.logged_steps = log
+            .iter()
+            .map(|input| match input {
+                GraphInput::Chunk(header, _) => u64::from(header.n_steps),
+                GraphInput::Request(..) => 0,
+            })
+            .sum();
         self.log = log;
         Ok(true)
     }
