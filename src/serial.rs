@@ -160,7 +160,11 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             broadcast_weights(&mut learner, &mut actors, &mut graph.service)?,
         )?;
         // This graph-service (fresh, or restored, which rebuilds its graph) is what a restore
-        // of its checkpoint gives back: a base for the input log.
+        // of its checkpoint gives back: a base for the input log. After a replay that did not
+        // match, the graph is rebuilt first so that this holds again.
+        if !graph.log.is_empty() {
+            graph.service.rebuild();
+        }
         graph.write_base();
     }
     let mut last_episodes = learner.ingest_stats().episodes_completed;
