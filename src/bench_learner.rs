@@ -390,6 +390,7 @@ fn build_level(shape: &LevelShape) -> anyhow::Result<SacLevel> {
         alpha: 0.2,
         auto_alpha: false,
         target_entropy: -(shape.action as f64),
+        critic_action_scale: 1.0,
     };
     Ok(SacLevel::new(shape.name, nets, params)?)
 }

@@ -79,6 +79,7 @@ fn sac(hidden: &[usize]) -> Result<SacLevel> {
         alpha: 0.2,
         auto_alpha: false,
         target_entropy: -(ACTION as f64),
+        critic_action_scale: 1.0,
     };
     Ok(SacLevel::new("low", nets, params)?)
 }

@@ -57,6 +57,7 @@ const PARAMS: SacParams = SacParams {
     alpha: 1.0,
     auto_alpha: true,
     target_entropy: -(PENDULUM_ACTION_DIM as f64),
+    critic_action_scale: 1.0,
 };
 
 /// Command line.

@@ -238,19 +238,32 @@ fn high_params(config: &Config, spec: &NetsSpec) -> SacParams {
         alpha: c.alpha,
         auto_alpha: c.auto_alpha,
         target_entropy: -(spec.latent_dim as f64),
+        critic_action_scale: 1.0,
     }
 }
 
-/// `[learner.low]` as SAC parameters; H̄ = −dim(action).
+/// `[learner.low]` as SAC parameters; H̄ = −dim(action), in the units of the normalised action
+/// `a / bound` when `critic_normalized_action` (log π carries the `ln bound` Jacobian per
+/// dimension, so H̄ = −dim + dim · ln bound in env units, CleanRL's target for a [−1, 1] action).
 fn low_params(config: &Config, spec: &NetsSpec) -> SacParams {
     let c = &config.learner.low;
+    let dim = spec.action_dim as f64;
+    let (target_entropy, critic_action_scale) = if c.critic_normalized_action {
+        (
+            -dim + dim * spec.low_action_scale.ln(),
+            spec.low_action_scale,
+        )
+    } else {
+        (-dim, 1.0)
+    };
     SacParams {
         gamma: c.gamma,
         tau: c.tau,
         lr: c.lr,
         alpha: c.alpha,
         auto_alpha: c.auto_alpha,
-        target_entropy: -(spec.action_dim as f64),
+        target_entropy,
+        critic_action_scale,
     }
 }
 
@@ -268,5 +281,25 @@ fn deterministic_params(config: &Config) -> DeterministicParams {
         target_update_period: u64::from(d.target_update_period),
         grad_clip: d.grad_clip,
         reach_threshold: config.hierarchy.low_reach_threshold,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_normalised_low_critic_takes_the_bound_and_the_normalised_entropy_target() {
+        let mut config = Config::default();
+        let spec = NetsSpec::default();
+        let plain = low_params(&config, &spec);
+        assert_eq!(plain.critic_action_scale, 1.0);
+        assert_eq!(plain.target_entropy, -(spec.action_dim as f64));
+        config.learner.low.critic_normalized_action = true;
+        let normalised = low_params(&config, &spec);
+        let (dim, bound) = (spec.action_dim as f64, spec.low_action_scale);
+        assert_eq!(normalised.critic_action_scale, bound);
+        assert!((normalised.target_entropy - (-dim + dim * bound.ln())).abs() < 1e-12);
+        assert_eq!(high_params(&config, &spec).critic_action_scale, 1.0);
     }
 }

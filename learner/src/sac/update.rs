@@ -38,6 +38,8 @@ pub struct SacParams {
     pub auto_alpha: bool,
     /// H̄ = −dim(action) (SAC v2 heuristic).
     pub target_entropy: f64,
+    /// The critics see `action / critic_action_scale` (1 = the raw action).
+    pub critic_action_scale: f64,
 }
 
 /// One minibatch as tensors. Shapes: `head, next_head: [B, h]`, `tail: [B, t]` (shared by s and
@@ -67,8 +69,20 @@ impl SacBatch {
         })
     }
 
-    /// Critic input `[head, action, tail]`.
-    fn critic_input(&self, head: &Tensor, action: &Tensor) -> Result<Tensor, LearnerError> {
+    /// Critic input `[head, action / action_scale, tail]`.
+    fn critic_input(
+        &self,
+        head: &Tensor,
+        action: &Tensor,
+        action_scale: f64,
+    ) -> Result<Tensor, LearnerError> {
+        let scaled;
+        let action = if action_scale == 1.0 {
+            action
+        } else {
+            scaled = action.affine(1.0 / action_scale, 0.0)?;
+            &scaled
+        };
         Ok(match &self.tail {
             Some(tail) => Tensor::cat(&[head, action, tail], 1)?,
             None => Tensor::cat(&[head, action], 1)?,
@@ -259,7 +273,11 @@ impl SacLevel {
     ) -> Result<Tensor, LearnerError> {
         let next_in = batch.policy_input(&batch.next_head)?;
         let (next_action, next_log_prob) = self.nets.policy.sample(&next_in, next_eps)?;
-        let next_q_in = batch.critic_input(&batch.next_head, &next_action.detach())?;
+        let next_q_in = batch.critic_input(
+            &batch.next_head,
+            &next_action.detach(),
+            self.params.critic_action_scale,
+        )?;
         let next_min_q = self.nets.target.min_q(&next_q_in)?;
         soft_target(
             &batch.reward,
@@ -277,10 +295,11 @@ impl SacLevel {
         batch: &SacBatch,
         target: &Tensor,
     ) -> Result<CriticStats, LearnerError> {
-        let q = self
-            .nets
-            .critic
-            .forward(&batch.critic_input(&batch.head, &batch.action)?)?;
+        let q = self.nets.critic.forward(&batch.critic_input(
+            &batch.head,
+            &batch.action,
+            self.params.critic_action_scale,
+        )?)?;
         let (loss, stats) = twin_critic_loss(&q, target)?;
         self.check_finite("critic loss", stats.loss)?;
         self.critic_opt.backward_step(&loss)?;
@@ -298,10 +317,11 @@ impl SacLevel {
             .nets
             .policy
             .sample(&batch.policy_input(&batch.head)?, eps)?;
-        let min_q = self
-            .nets
-            .critic
-            .min_q(&batch.critic_input(&batch.head, &action)?)?;
+        let min_q = self.nets.critic.min_q(&batch.critic_input(
+            &batch.head,
+            &action,
+            self.params.critic_action_scale,
+        )?)?;
         let (loss, stats) = actor_loss(&log_prob, &min_q, alpha)?;
         self.check_finite("actor loss", stats.loss)?;
         self.policy_opt.backward_step(&loss)?;
@@ -376,5 +396,37 @@ fn check_pairs(level: &'static str, online: &[Var], target: &[Var]) -> Result<()
     } else {
         let reason = format!("{level} level: the target critic does not mirror the online critic");
         Err(LearnerError::Nets(nets::NetsError::Spec(reason)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::Device;
+
+    #[test]
+    fn the_critic_sees_the_action_divided_by_its_scale() {
+        let dev = Device::Cpu;
+        let t = |v: &[f32], cols: usize| Tensor::from_slice(v, (v.len() / cols, cols), &dev);
+        let batch = SacBatch {
+            head: t(&[1., 2.], 2).unwrap(),
+            next_head: t(&[3., 4.], 2).unwrap(),
+            tail: Some(t(&[5.], 1).unwrap()),
+            action: t(&[8., -16.], 2).unwrap(),
+            reward: t(&[0.], 1).unwrap(),
+            terminal: t(&[0.], 1).unwrap(),
+        };
+        let raw = batch.critic_input(&batch.head, &batch.action, 1.0).unwrap();
+        assert_eq!(
+            raw.to_vec2::<f32>().unwrap(),
+            vec![vec![1., 2., 8., -16., 5.]]
+        );
+        let scaled = batch
+            .critic_input(&batch.head, &batch.action, 16.0)
+            .unwrap();
+        assert_eq!(
+            scaled.to_vec2::<f32>().unwrap(),
+            vec![vec![1., 2., 0.5, -1., 5.]]
+        );
     }
 }

@@ -128,6 +128,11 @@ pub struct LowLearnerConfig {
     pub alpha: f64,
     /// SAC: tune α towards the target entropy −dim(action). Default false. Source: ours.
     pub auto_alpha: bool,
+    /// SAC: feed the critics the action divided by the env's action bound (in [−1, 1]) instead
+    /// of the raw torque, as the reference code's low critic does (`action / 16`), and take the
+    /// `auto_alpha` target entropy −dim(action) in those normalised units. Default false.
+    /// Source: ours (digest §3.2 for the reference's critic input).
+    pub critic_normalized_action: bool,
     /// SAC: hidden layer widths of policy and critics. Default [256, 256]. Source: supplement.
     pub hidden: Vec<usize>,
     /// Gradient updates per training episode, used to derive the per-step ratio when
@@ -152,6 +157,7 @@ impl Default for LowLearnerConfig {
             batch_size: 128,
             alpha: 0.2,
             auto_alpha: false,
+            critic_normalized_action: false,
             hidden: vec![256, 256],
             updates_per_episode: 200,
             updates_per_env_step: None,
