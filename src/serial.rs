@@ -81,150 +81,27 @@ fn install_stop_handlers() {
 }
 
 pub fn run(ctx: RunContext) -> anyhow::Result<()> {
-    let config = &ctx.config;
-    let task = task_info(config)?;
-    let dims = task.dims;
-    let seed = config.run.seed;
-    let serial_dir = ctx.checkpoint_dir().join(checkpoint::SUBDIR);
-    // Read and checked first: an incompatible serial checkpoint stops the run before anything
-    // is written.
-    let saved = match ctx.resume {
-        true => checkpoint::read_latest(&serial_dir, config).with_context(|| {
-            format!(
-                "restoring the serial state from {} (start over with `asi train --restart`)",
-                serial_dir.display()
-            )
-        })?,
-        false => None,
-    };
-    let mut learner = crate::run::open_learner(&ctx, dims, task.episode_length)?;
-    let graph_dir = ctx.checkpoint_dir().join(graph_service::checkpoint::SUBDIR);
-    let (service, start) = open_service(&ctx, &graph_dir, dims)?;
-    let base = start
-        .restored_from
-        .as_ref()
-        .and_then(|p| p.file_name())
-        .map(|n| n.to_string_lossy().into_owned());
-    let mut graph = LoggedGraph::new(service, graph_dir, base, config.graph.max_stored_steps);
-    tracing::info!(
-        restored_stored_steps = start.restored_stored_steps,
-        "serial graph-service {}",
-        start
-            .restored_from
-            .as_ref()
-            .map_or("started empty".to_owned(), |p| format!(
-                "restored from {}",
-                p.display()
-            ))
-    );
-    let mut picture = SerialPicture::new(&ctx)?;
-    let mut actors = (0..config.run.n_actors as u32)
-        .map(|id| Actor::new(config, ActorId(id), seed))
-        .collect::<Result<Vec<_>, _>>()
-        .context("building the actors")?;
-    // A resumed run continues its metrics file.
-    let metrics_file = std::fs::OpenOptions::new()
-        .create(true)
-        .write(true)
-        .append(ctx.resume)
-        .truncate(!ctx.resume)
-        .open(ctx.run_dir.join("metrics.jsonl"))?;
-    let mut metrics = BufWriter::new(metrics_file);
-    let mut actor_lines: Vec<ActorLine> = actors.iter().map(|_| ActorLine::default()).collect();
-    let mut eval = SerialEval::new(config, &ctx.run_dir)?;
-    let mut coverage = CoverageTracker::new(config, task.layout)?;
-    let mut loop_state = SerialLoop {
-        actors: &mut actors,
-        lines: &mut actor_lines,
-        eval: &mut eval,
-        coverage: &mut coverage,
-    };
-    let exact = match saved {
-        Some(saved) => loop_state.restore(saved, &learner, &mut graph)?,
-        None => {
-            if ctx.resume {
-                tracing::warn!(
-                    "no serial checkpoint in {}: the actors start new episodes and the resumed run \
-                     is not bit-identical to an uninterrupted one",
-                    serial_dir.display()
-                );
-            }
-            false
-        }
-    };
-    // An exact resume continues right after the round at which the checkpoint was written,
-    // whose broadcast the actors already hold; publishing here would add a broadcast.
-    if !exact {
-        eval.on_weights(
-            &ctx,
-            broadcast_weights(&mut learner, &mut actors, &mut graph.service)?,
-        )?;
-        // This graph-service (fresh, or restored, which rebuilds its graph) is what a restore
-        // of its checkpoint gives back: a base for the input log. After a replay that did not
-        // match, the graph is rebuilt first so that this holds again.
-        if !graph.log.is_empty() {
-            graph.service.rebuild();
-        }
-        graph.write_base();
-    }
-    let mut last_episodes = learner.ingest_stats().episodes_completed;
-    // Env steps at the last metrics line of this run (an exact resume had just written one).
-    let mut line_at = exact.then(|| learner.progress().env_steps_ingested);
-    let mut checkpoints = crate::run::CheckpointTimer::new(config);
+    let mut serial = Serial::open(ctx)?;
+    let mut checkpoints = crate::run::CheckpointTimer::new(&serial.ctx.config);
     install_stop_handlers();
-    let mut stopped = false;
     let mut waiting_logged = false;
-    while !budget_reached(config, &learner) {
-        for (actor, line) in actors.iter_mut().zip(&mut actor_lines) {
-            catch_up(&mut learner)?;
-            let chunk = actor.next_chunk(&mut ServiceOracle::new(InProcessGraph(&mut graph)))?;
-            line.published_steps += u64::from(chunk.header.n_steps);
-            learner.ingest(&chunk.header, &chunk.records)?;
-            coverage.observe(&chunk.records);
-            graph.ingest(&chunk.header, &chunk.records)?;
-        }
-        catch_up(&mut learner)?;
-        let version_before = graph.service.stats().graph_version;
-        eval.on_weights(
-            &ctx,
-            broadcast_weights(&mut learner, &mut actors, &mut graph.service)?,
-        )?;
-        // A φ re-map rebuilt the graph from every stored state: a restore of a checkpoint
-        // written now gives this graph back, so the input log can start over from it.
-        if graph.service.stats().graph_version != version_before {
-            graph.write_base();
-        }
-        self_imitate(&mut learner, &mut graph)?;
-        let episodes = learner.ingest_stats().episodes_completed;
-        if episodes != last_episodes {
-            write_line(
-                &mut metrics,
-                &learner,
-                &graph.service,
-                &actors,
-                &mut actor_lines,
-                &eval.latest,
-                &coverage,
-            )?;
-            last_episodes = episodes;
-            line_at = Some(learner.progress().env_steps_ingested);
-        }
+    let mut stopped = false;
+    while !budget_reached(&serial.ctx.config, &serial.learner) {
+        serial.round()?;
+        serial.line_if_episodes_ended()?;
         // Checkpoints and stops wait for a round boundary with no open episode, so that no
         // environment state needs saving; they read state only, so the run's metrics do not
         // depend on when they fall.
         let stop = STOP_REQUESTED.load(Ordering::Relaxed);
         if stop || checkpoints.is_due() {
-            let idle = !actors.iter().any(Actor::has_open_episode);
-            if !idle {
+            if serial.actors.iter().any(Actor::has_open_episode) {
                 if !waiting_logged {
-                    tracing::info!(
-                        "{}: letting the open episodes finish first",
-                        if stop {
-                            "stop requested"
-                        } else {
-                            "checkpoint due"
-                        }
-                    );
+                    let why = if stop {
+                        "stop requested"
+                    } else {
+                        "checkpoint due"
+                    };
+                    tracing::info!("{why}: letting the open episodes finish first");
                     waiting_logged = true;
                 }
             } else if stop {
@@ -232,80 +109,202 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
                 break;
             } else {
                 waiting_logged = false;
-                if checkpoints.tick(&ctx, &learner) {
-                    let mut parts = SerialLoop {
-                        actors: &mut actors,
-                        lines: &mut actor_lines,
-                        eval: &mut eval,
-                        coverage: &mut coverage,
-                    };
-                    if let Err(err) = parts.save(&serial_dir, config, &learner, &graph) {
+                if checkpoints.tick(&serial.ctx, &serial.learner) {
+                    if let Err(err) = serial.save() {
                         tracing::error!("writing the serial checkpoint failed: {err:#}");
                     }
                 }
             }
         }
-        picture.tick(episodes, &graph.service);
+        let episodes = serial.learner.ingest_stats().episodes_completed;
+        serial.picture.tick(episodes, &serial.graph.service);
     }
-    if line_at != Some(learner.progress().env_steps_ingested) {
+    serial.finish(stopped)
+}
+
+/// Everything the serial loop drives and keeps.
+struct Serial {
+    ctx: RunContext,
+    /// `checkpoints/serial/`.
+    serial_dir: std::path::PathBuf,
+    learner: Learner,
+    graph: LoggedGraph,
+    actors: Vec<Actor>,
+    lines: Vec<ActorLine>,
+    eval: SerialEval,
+    coverage: CoverageTracker,
+    metrics: BufWriter<std::fs::File>,
+    picture: SerialPicture,
+    /// Episodes completed at the last metrics line.
+    last_episodes: u64,
+    /// Env steps at the last metrics line of this launch (an exact resume had just written
+    /// one).
+    line_at: Option<u64>,
+}
+
+impl Serial {
+    /// Builds (or restores, on a resume) every component, and broadcasts the first weights
+    /// unless the resume is exact.
+    fn open(ctx: RunContext) -> anyhow::Result<Self> {
+        let config = &ctx.config;
+        let task = task_info(config)?;
+        let serial_dir = ctx.checkpoint_dir().join(checkpoint::SUBDIR);
+        // Read and checked first: an incompatible serial checkpoint stops the run before
+        // anything is written.
+        let saved = match ctx.resume {
+            true => checkpoint::read_latest(&serial_dir, config).with_context(|| {
+                format!(
+                    "restoring the serial state from {} (start over with `asi train --restart`)",
+                    serial_dir.display()
+                )
+            })?,
+            false => None,
+        };
+        let learner = crate::run::open_learner(&ctx, task.dims, task.episode_length)?;
+        let graph = open_graph(&ctx, task.dims)?;
+        let actors = (0..config.run.n_actors as u32)
+            .map(|id| Actor::new(config, ActorId(id), config.run.seed))
+            .collect::<Result<Vec<_>, _>>()
+            .context("building the actors")?;
+        // A resumed run continues its metrics file.
+        let metrics_file = std::fs::OpenOptions::new()
+            .create(true)
+            .write(true)
+            .append(ctx.resume)
+            .truncate(!ctx.resume)
+            .open(ctx.run_dir.join("metrics.jsonl"))?;
+        let mut serial = Serial {
+            lines: actors.iter().map(|_| ActorLine::default()).collect(),
+            eval: SerialEval::new(config, &ctx.run_dir)?,
+            coverage: CoverageTracker::new(config, task.layout)?,
+            picture: SerialPicture::new(&ctx)?,
+            metrics: BufWriter::new(metrics_file),
+            last_episodes: learner.ingest_stats().episodes_completed,
+            line_at: None,
+            serial_dir,
+            learner,
+            graph,
+            actors,
+            ctx,
+        };
+        serial.start(saved)?;
+        Ok(serial)
+    }
+
+    /// Restores the serial state if there is one; an exact resume continues right after the
+    /// round at which the checkpoint was written, whose broadcast the actors already hold
+    /// (publishing here would add a broadcast).
+    fn start(&mut self, saved: Option<checkpoint::Restored>) -> anyhow::Result<()> {
+        let exact = match saved {
+            Some(saved) => self.restore(saved)?,
+            None => {
+                if self.ctx.resume {
+                    tracing::warn!(
+                        "no serial checkpoint in {}: the actors start new episodes and the \
+                         resumed run is not bit-identical to an uninterrupted one",
+                        self.serial_dir.display()
+                    );
+                }
+                false
+            }
+        };
+        if exact {
+            self.line_at = Some(self.learner.progress().env_steps_ingested);
+            return Ok(());
+        }
+        let published =
+            broadcast_weights(&mut self.learner, &mut self.actors, &mut self.graph.service)?;
+        self.eval.on_weights(&self.ctx, published)?;
+        // This graph-service (fresh, or restored, which rebuilds its graph) is what a restore
+        // of its checkpoint gives back: a base for the input log. After a replay that did not
+        // match, the graph is rebuilt first so that this holds again.
+        if !self.graph.log.is_empty() {
+            self.graph.service.rebuild();
+        }
+        self.graph.write_base();
+        Ok(())
+    }
+
+    /// One chunk from every actor, the updates the replay ratio allows, the weights broadcast
+    /// (and any evaluation due), and the self-imitation rounds due.
+    fn round(&mut self) -> anyhow::Result<()> {
+        let learner = &mut self.learner;
+        for (actor, line) in self.actors.iter_mut().zip(&mut self.lines) {
+            catch_up(learner)?;
+            let chunk =
+                actor.next_chunk(&mut ServiceOracle::new(InProcessGraph(&mut self.graph)))?;
+            line.published_steps += u64::from(chunk.header.n_steps);
+            learner.ingest(&chunk.header, &chunk.records)?;
+            self.coverage.observe(&chunk.records);
+            self.graph.ingest(&chunk.header, &chunk.records)?;
+        }
+        catch_up(learner)?;
+        let version_before = self.graph.service.stats().graph_version;
+        let published = broadcast_weights(learner, &mut self.actors, &mut self.graph.service)?;
+        self.eval.on_weights(&self.ctx, published)?;
+        // A φ re-map rebuilt the graph from every stored state: a restore of a checkpoint
+        // written now gives this graph back, so the input log can start over from it.
+        if self.graph.service.stats().graph_version != version_before {
+            self.graph.write_base();
+        }
+        self_imitate(learner, &mut self.graph)
+    }
+
+    /// A metrics line if episodes completed since the last one.
+    fn line_if_episodes_ended(&mut self) -> anyhow::Result<()> {
+        let episodes = self.learner.ingest_stats().episodes_completed;
+        if episodes != self.last_episodes {
+            self.write_line()?;
+            self.last_episodes = episodes;
+        }
+        Ok(())
+    }
+
+    fn write_line(&mut self) -> anyhow::Result<()> {
         write_line(
-            &mut metrics,
-            &learner,
-            &graph.service,
-            &actors,
-            &mut actor_lines,
-            &eval.latest,
-            &coverage,
+            &mut self.metrics,
+            &self.learner,
+            &self.graph.service,
+            &self.actors,
+            &mut self.lines,
+            &self.eval.latest,
+            &self.coverage,
         )?;
+        self.line_at = Some(self.learner.progress().env_steps_ingested);
+        Ok(())
     }
-    metrics.flush()?;
-    eval.finish();
-    crate::run::final_checkpoint(&ctx, &mut learner)?;
-    if actors.iter().any(Actor::has_open_episode) {
-        tracing::warn!(
-            "the run ended with open episodes: they are not saved, and a resume continues with \
-             new episodes (not bit-identical to an uninterrupted run)"
-        );
-    }
-    SerialLoop {
-        actors: &mut actors,
-        lines: &mut actor_lines,
-        eval: &mut eval,
-        coverage: &mut coverage,
-    }
-    .save(&serial_dir, config, &learner, &graph)
-    .context("writing the final serial checkpoint")?;
-    picture.draw_if_behind(&graph.service);
-    let env_steps = learner.progress().env_steps_ingested;
-    if stopped {
-        tracing::info!(
-            env_steps,
-            "stopped by signal; checkpoint written, run folder {}",
-            ctx.run_dir.display()
-        );
-    } else {
-        tracing::info!(env_steps, "serial run finished");
-    }
-    Ok(())
-}
 
-/// The serial loop's own state, borrowed to save or restore it (see [`checkpoint`]).
-struct SerialLoop<'a> {
-    actors: &'a mut [Actor],
-    lines: &'a mut [ActorLine],
-    eval: &'a mut SerialEval,
-    coverage: &'a mut CoverageTracker,
-}
+    /// The last metrics line (if anything changed since the previous one) and checkpoint.
+    fn finish(mut self, stopped: bool) -> anyhow::Result<()> {
+        if self.line_at != Some(self.learner.progress().env_steps_ingested) {
+            self.write_line()?;
+        }
+        self.metrics.flush()?;
+        self.eval.finish();
+        crate::run::final_checkpoint(&self.ctx, &mut self.learner)?;
+        if self.actors.iter().any(Actor::has_open_episode) {
+            tracing::warn!(
+                "the run ended with open episodes: they are not saved, and a resume continues \
+                 with new episodes (not bit-identical to an uninterrupted run)"
+            );
+        }
+        self.save().context("writing the final serial checkpoint")?;
+        self.picture.draw_if_behind(&self.graph.service);
+        let env_steps = self.learner.progress().env_steps_ingested;
+        if stopped {
+            tracing::info!(
+                env_steps,
+                "stopped by signal; checkpoint written, run folder {}",
+                self.ctx.run_dir.display()
+            );
+        } else {
+            tracing::info!(env_steps, "serial run finished");
+        }
+        Ok(())
+    }
 
-impl SerialLoop<'_> {
-    /// Writes the serial checkpoint beside the learner's and graph-service's just written.
-    fn save(
-        &mut self,
-        dir: &std::path::Path,
-        config: &protocol::Config,
-        learner: &Learner,
-        graph: &LoggedGraph,
-    ) -> anyhow::Result<()> {
+    /// Writes the serial checkpoint beside the learner's just written.
+    fn save(&mut self) -> anyhow::Result<()> {
         let clock = std::time::Instant::now();
         let Some((header, bytes)) = &self.eval.last_weights else {
             bail!("no weights were broadcast yet");
@@ -321,13 +320,15 @@ impl SerialLoop<'_> {
                 .map(|grid| (grid.counts().to_vec(), grid.n_outside())),
             weights: checkpoint::SavedHeader::of(header),
         };
+        let graph = &self.graph;
         let moment = checkpoint::Moment {
-            learner_env_steps: learner.progress().env_steps_ingested,
+            learner_env_steps: self.learner.progress().env_steps_ingested,
             graph_stored_steps: graph.service.stats().stored_steps,
             graph_base: graph.base.clone(),
             graph_log: graph.complete.then_some(&graph.log[..]),
         };
-        let (path, manifest) = checkpoint::write(dir, config, &state, bytes, moment)?;
+        let (path, manifest) =
+            checkpoint::write(&self.serial_dir, &self.ctx.config, &state, bytes, moment)?;
         tracing::info!(
             secs = clock.elapsed().as_secs_f64(),
             "serial checkpoint written to {} ({})",
@@ -337,14 +338,10 @@ impl SerialLoop<'_> {
         Ok(())
     }
 
-    /// Restores a serial checkpoint into the fresh loop state; true when the resume is exact
-    /// (written between episodes, and of the same moment as the restored learner and graph).
-    fn restore(
-        &mut self,
-        saved: checkpoint::Restored,
-        learner: &Learner,
-        graph: &mut LoggedGraph,
-    ) -> anyhow::Result<bool> {
+    /// Restores a serial checkpoint into the fresh components; true when the resume is exact
+    /// (see [`checkpoint::Manifest::exact`], and of the same moment as the restored learner
+    /// and graph-service).
+    fn restore(&mut self, saved: checkpoint::Restored) -> anyhow::Result<bool> {
         let checkpoint::Restored {
             state,
             weights: (header, bytes),
@@ -352,7 +349,7 @@ impl SerialLoop<'_> {
             path,
             graph_log,
         } = saved;
-        let replayed = graph.replay(&manifest, graph_log)?;
+        let replayed = self.graph.replay(&manifest, graph_log)?;
         let saved_lines = state.actors.into_iter().zip(state.published_steps);
         for ((actor, line), (saved, steps)) in self
             .actors
@@ -374,8 +371,8 @@ impl SerialLoop<'_> {
         self.eval.latest = state.eval_latest;
         self.eval.last_weights = Some((header, bytes));
         let now = (
-            learner.progress().env_steps_ingested,
-            graph.service.stats().stored_steps,
+            self.learner.progress().env_steps_ingested,
+            self.graph.service.stats().stored_steps,
         );
         let matched = replayed && now == (manifest.learner_env_steps, manifest.graph_stored_steps);
         if !matched {
@@ -395,17 +392,38 @@ impl SerialLoop<'_> {
             );
         }
         let exact = matched && manifest.exact();
-        tracing::info!(
-            "serial state restored from {}: {}",
-            path.display(),
-            if exact {
-                "bit-exact resume"
-            } else {
-                "resume not bit-exact"
-            }
-        );
+        let how = if exact {
+            "bit-exact resume"
+        } else {
+            "resume not bit-exact"
+        };
+        tracing::info!("serial state restored from {}: {how}", path.display());
         Ok(exact)
     }
+}
+
+/// The graph-service, restored from its newest checkpoint (the input log's base) if any.
+fn open_graph(ctx: &RunContext, dims: nets::TaskDims) -> anyhow::Result<LoggedGraph> {
+    let dir = ctx.checkpoint_dir().join(graph_service::checkpoint::SUBDIR);
+    let (service, start) = open_service(ctx, &dir, dims)?;
+    let from = start.restored_from.as_ref();
+    tracing::info!(
+        restored_stored_steps = start.restored_stored_steps,
+        "serial graph-service {}",
+        from.map_or("started empty".to_owned(), |p| format!(
+            "restored from {}",
+            p.display()
+        ))
+    );
+    let base = from
+        .and_then(|p| p.file_name())
+        .map(|n| n.to_string_lossy().into_owned());
+    Ok(LoggedGraph::new(
+        service,
+        dir,
+        base,
+        ctx.config.graph.max_stored_steps,
+    ))
 }
 
 fn budget_reached(config: &protocol::Config, learner: &Learner) -> bool {
