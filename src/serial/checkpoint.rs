@@ -64,6 +64,8 @@ pub struct Manifest {
     pub seed: u64,
     /// `env.task`.
     pub task: String,
+    /// `eval.interval_episodes` (the saved evaluation schedule counts in its units).
+    pub eval_interval_episodes: u64,
     /// Env steps the learner had ingested when it was written.
     pub learner_env_steps: u64,
     /// States the graph-service stored when it was written.
@@ -354,6 +356,7 @@ pub fn write(
         n_actors: config.run.n_actors as u32,
         seed: config.run.seed,
         task: config.env.task.clone(),
+        eval_interval_episodes: config.eval.interval_episodes,
         learner_env_steps: moment.learner_env_steps,
         graph_stored_steps: moment.graph_stored_steps,
         n_open_episodes: state.actors.iter().filter(|a| a.had_open_episode).count() as u32,
@@ -436,6 +439,15 @@ fn check_compatible(
             "serial checkpoint {} was written by a run with (actors, seed, task) = {theirs:?}, \
              this run has {ours:?}; resume with the same values or start over with --restart",
             path.display()
+        );
+    }
+    if manifest.eval_interval_episodes != config.eval.interval_episodes {
+        tracing::warn!(
+            "serial checkpoint {}: eval.interval_episodes was {}, is {}; the checkpoint's \
+             evaluation schedule (and interval) is kept",
+            path.display(),
+            manifest.eval_interval_episodes,
+            config.eval.interval_episodes
         );
     }
     Ok(())
