@@ -323,3 +323,22 @@ fn a_serial_checkpoint_of_other_actors_or_a_corrupt_one_is_refused_with_a_clear_
         "a refused resume writes nothing"
     );
 }
+
+#[test]
+fn a_run_ended_mid_episode_by_its_step_budget_resumes_and_says_it_is_not_exact() {
+    let tmp = TempDir::new("mid-episode");
+    let dir = tmp.0.join("run");
+    // 2 actors × 50-step chunks: the budget is met after the third round, mid-episode.
+    let budget = ["--set".to_owned(), "run.max_env_steps=250".to_owned()];
+    let first = serial_train(&dir, 100, &budget);
+    let stderr = String::from_utf8_lossy(&first.stderr);
+    assert!(stderr.contains("2 open episodes are lost"), "{stderr}");
+    let second = serial_train(&dir, 4, &[]);
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert!(
+        stderr.contains("resume not bit-exact") && stderr.contains("open episodes are lost"),
+        "{stderr}"
+    );
+    let written = lines(&dir.join("metrics.jsonl"));
+    assert_eq!(written.last().map(|l| episodes_of(l)), Some(4));
+}
