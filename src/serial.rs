@@ -290,6 +290,7 @@ impl Serial {
         }
         self.save().context("writing the final serial checkpoint")?;
         self.picture.draw_if_behind(&self.graph.service);
+        crate::plot::redraw_run_curves(&self.picture.run_dir);
         let env_steps = self.learner.progress().env_steps_ingested;
         if stopped {
             tracing::info!(
@@ -538,10 +539,13 @@ impl SerialEval {
 }
 
 /// `plots/graph_latest.png` in serial mode: redrawn when the graph changed, at most once per
-/// [`REDRAW_EPISODES`] completed episodes (no clock in the loop), and at the end.
+/// [`REDRAW_EPISODES`] completed episodes (no clock in the loop), and at the end; beside it
+/// `plots/curves.png` (success and coverage curves) on the same schedule.
 struct SerialPicture {
     plot: Option<MazeGraphPlot>,
     last_episodes: Option<u64>,
+    run_dir: std::path::PathBuf,
+    last_curves: u64,
 }
 
 impl SerialPicture {
@@ -549,10 +553,16 @@ impl SerialPicture {
         Ok(Self {
             plot: MazeGraphPlot::new(&ctx.config, &ctx.run_dir)?,
             last_episodes: None,
+            run_dir: ctx.run_dir.clone(),
+            last_curves: 0,
         })
     }
 
     fn tick(&mut self, episodes: u64, graph: &GraphService) {
+        if episodes >= self.last_curves + REDRAW_EPISODES {
+            self.last_curves = episodes;
+            crate::plot::redraw_run_curves(&self.run_dir);
+        }
         if self
             .last_episodes
             .is_none_or(|last| episodes >= last + REDRAW_EPISODES)

@@ -265,6 +265,11 @@ fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_b
         picture.starts_with(b"\x89PNG"),
         "serial mode draws the graph"
     );
+    let curves = std::fs::read(dir.0.join("plots/curves.png")).unwrap_or_default();
+    assert!(
+        curves.starts_with(b"\x89PNG"),
+        "serial mode draws the success and coverage curves"
+    );
 
     let second = train(&dir, &["--serial", "--set", "run.max_episodes=8"]);
     assert!(

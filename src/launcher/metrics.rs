@@ -210,25 +210,7 @@ impl MetricsBook {
     /// logged, never fatal.
     pub fn plot(&mut self) {
         self.last_plot = Instant::now();
-        let metrics: Vec<String> = crate::plot::DEFAULT_METRICS
-            .iter()
-            .map(|m| (*m).to_owned())
-            .collect();
-        let drawn = std::fs::create_dir_all(self.run_dir.join("plots"))
-            .map_err(anyhow::Error::from)
-            .and_then(|()| {
-                crate::plot::build_figure(
-                    std::slice::from_ref(&self.run_dir),
-                    crate::plot::DEFAULT_X,
-                    &metrics,
-                )
-            })
-            .and_then(|figure| {
-                crate::plot::render_png(&figure, &self.run_dir.join("plots").join("curves.png"))
-            });
-        if let Err(err) = drawn {
-            tracing::warn!("plots/curves.png not drawn: {err:#}");
-        }
+        crate::plot::redraw_run_curves(&self.run_dir);
     }
 
     pub fn finish(&mut self) {

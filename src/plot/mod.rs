@@ -181,6 +181,20 @@ pub struct Figure {
     pub arms: Vec<(String, Vec<Option<Band>>)>,
 }
 
+/// Redraws `run_dir/plots/curves.png` (the default metrics against env steps) from the run's
+/// `metrics.jsonl`; a failure is logged, never fatal (used during a run).
+pub fn redraw_run_curves(run_dir: &Path) {
+    let metrics: Vec<String> = DEFAULT_METRICS.iter().map(|m| (*m).to_owned()).collect();
+    let plots = run_dir.join("plots");
+    let drawn = std::fs::create_dir_all(&plots)
+        .map_err(anyhow::Error::from)
+        .and_then(|()| build_figure(&[run_dir.to_path_buf()], DEFAULT_X, &metrics))
+        .and_then(|figure| render_png(&figure, &plots.join("curves.png")));
+    if let Err(err) = drawn {
+        tracing::warn!("plots/curves.png not drawn: {err:#}");
+    }
+}
+
 /// Reads every run and aggregates it per arm and metric.
 pub fn build_figure(
     run_dirs: &[PathBuf],
