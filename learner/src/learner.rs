@@ -357,7 +357,9 @@ impl Learner {
     }
 
     /// One slice of the running φ round (at most `max_updates` and [`PHI_STEPS_PER_CALL`]
-    /// steps, at least one); a finished round raises the φ version.
+    /// steps, at least one); a finished round raises the φ version. Steps with a non-finite
+    /// loss are skipped and counted by the trainer, and a round made only of them ends with
+    /// the version unchanged, so no NaN reaches φ and the learner goes on.
     fn phi_slice(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
         let cap = u64::try_from(max_updates).unwrap_or(u64::MAX);
         let steps = cap.clamp(1, PHI_STEPS_PER_CALL);
@@ -642,6 +644,11 @@ impl Learner {
             ("phi/rounds", s.rounds as f64),
             ("phi/skipped_rounds", s.skipped_rounds as f64),
             ("phi/coalesced_rounds", s.coalesced_rounds as f64),
+            (
+                "phi/skipped_nonfinite_steps",
+                s.skipped_nonfinite_steps as f64,
+            ),
+            ("phi/nonfinite_rounds", s.nonfinite_rounds as f64),
             (
                 "phi/round_active",
                 f64::from(u8::from(self.phi.is_active())),

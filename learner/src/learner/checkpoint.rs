@@ -874,6 +874,11 @@ struct PhiSaved {
     steps: u64,
     round_start_loss: f64,
     round_end_loss: f64,
+    /// Absent (0) in checkpoints written before non-finite φ steps were skipped.
+    #[serde(default)]
+    skipped_nonfinite_steps: u64,
+    #[serde(default)]
+    nonfinite_rounds: u64,
 }
 
 impl State {
@@ -923,6 +928,8 @@ impl State {
                 steps: phi_stats.steps,
                 round_start_loss: phi_stats.round_start_loss,
                 round_end_loss: phi_stats.round_end_loss,
+                skipped_nonfinite_steps: phi_stats.skipped_nonfinite_steps,
+                nonfinite_rounds: phi_stats.nonfinite_rounds,
             },
         }
     }
@@ -978,6 +985,8 @@ impl State {
         stats.steps = f.steps;
         stats.round_start_loss = f.round_start_loss;
         stats.round_end_loss = f.round_end_loss;
+        stats.skipped_nonfinite_steps = f.skipped_nonfinite_steps;
+        stats.nonfinite_rounds = f.nonfinite_rounds;
         if let Some(telemetry) = self.telemetry {
             telemetry.apply(l);
         }

@@ -27,6 +27,12 @@
 //!   and written back as its priority when the round ends; later samples overwrite earlier
 //!   ones, never-sampled states keep theirs.
 //!
+//! A step whose loss is NaN or infinite (e.g. states so large that φ overflows f32) is skipped:
+//! no Adam step, φ and the priorities untouched, counted
+//! ([`PhiStats::skipped_nonfinite_steps`]); it still uses up one of the round's steps, so a
+//! round always ends. A round whose every step was skipped ends without changing φ and is
+//! counted ([`PhiStats::nonfinite_rounds`]), not published.
+//!
 //! The Adam state (moments, step count) persists across rounds; φ is never re-initialised.
 //! Work is done in slices ([`PhiTrainer::run_slice`]) so that the owner stays responsive.
 
@@ -128,6 +134,11 @@ pub struct PhiStats {
     pub coalesced_rounds: u64,
     /// Adam steps run in total.
     pub steps: u64,
+    /// Steps skipped because their loss was NaN or infinite (no Adam step, φ unchanged).
+    pub skipped_nonfinite_steps: u64,
+    /// Rounds whose every step was skipped as non-finite: ended with φ unchanged, not
+    /// counted in `rounds`, nothing to publish.
+    pub nonfinite_rounds: u64,
     /// Seconds spent in φ steps (metrics only).
     pub secs: f64,
     /// Mean per-sample triplet loss over the first slice of the latest round.
@@ -168,6 +179,8 @@ struct ActiveRound {
     reg: RegSampler,
     new_priority: Vec<f32>,
     steps_done: u64,
+    /// Of `steps_done`, those skipped for a non-finite loss.
+    skipped_steps: u64,
     slice_loss_sum: f64,
     slice_samples: u64,
 }
@@ -175,9 +188,12 @@ struct ActiveRound {
 /// What a slice of work did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SliceOutcome {
-    /// Adam steps run.
+    /// Steps of the round used up: Adam steps run plus steps skipped for a non-finite loss.
     pub steps: u64,
-    /// The round ended in this slice (φ changed; publish it).
+    /// Of `steps`, those skipped for a non-finite loss (no Adam step).
+    pub skipped_nonfinite: u64,
+    /// The round ended in this slice and φ changed (publish it). A round whose every step
+    /// was skipped ends with this `false`: the trainer is idle again, φ is unchanged.
     pub round_finished: bool,
 }
 
@@ -335,6 +351,7 @@ impl PhiTrainer {
             anchors,
             reg,
             steps_done: 0,
+            skipped_steps: 0,
             slice_loss_sum: 0.0,
             slice_samples: 0,
         });
@@ -359,7 +376,9 @@ impl PhiTrainer {
     }
 
     /// Runs at most `max_steps` steps of the active round; at its end writes the priorities
-    /// back, thaws `store` and reports `round_finished`. No-op without an active round.
+    /// back, thaws `store` and reports `round_finished` (unless every step of the round was
+    /// skipped as non-finite). No-op without an active round. A non-finite step is skipped and
+    /// counted, not an error.
     pub fn run_slice(
         &mut self,
         store: &mut PhiStore,
@@ -372,32 +391,45 @@ impl PhiTrainer {
         let n = max_steps.min(self.params.steps_per_round - round.steps_done);
         round.slice_loss_sum = 0.0;
         round.slice_samples = 0;
+        let skipped_before = round.skipped_steps;
         let result = (0..n).try_for_each(|_| self.step(&mut round, store));
         self.stats.secs += start.elapsed().as_secs_f64();
         if let Err(err) = result {
             self.abort(round, store);
             return Err(err);
         }
-        let slice_mean = round.slice_loss_sum / round.slice_samples.max(1) as f64;
+        let mut outcome = SliceOutcome {
+            steps: n,
+            skipped_nonfinite: round.skipped_steps - skipped_before,
+            round_finished: false,
+        };
+        // A slice of skipped steps only has no loss to report; the previous value stays.
+        let slice_mean =
+            (round.slice_samples > 0).then(|| round.slice_loss_sum / round.slice_samples as f64);
         if round.steps_done == n {
-            self.stats.round_start_loss = slice_mean;
+            if let Some(mean) = slice_mean {
+                self.stats.round_start_loss = mean;
+            }
         }
         if round.steps_done < self.params.steps_per_round {
             self.active = Some(round);
-            return Ok(SliceOutcome {
-                steps: n,
-                round_finished: false,
-            });
+            return Ok(outcome);
         }
-        self.stats.round_end_loss = slice_mean;
+        if round.skipped_steps == round.steps_done {
+            self.stats.nonfinite_rounds += 1;
+            self.abort(round, store);
+            return Ok(outcome);
+        }
+        if let Some(mean) = slice_mean {
+            self.stats.round_end_loss = mean;
+        }
         self.finish(round, store);
-        Ok(SliceOutcome {
-            steps: n,
-            round_finished: true,
-        })
+        outcome.round_finished = true;
+        Ok(outcome)
     }
 
-    /// One Adam step of `round`.
+    /// One Adam step of `round`, or none when the loss is not finite (counted; φ and the
+    /// priorities untouched).
     fn step(&mut self, round: &mut ActiveRound, store: &PhiStore) -> Result<(), LearnerError> {
         let b = self.params.batch_size;
         let with_stable = round.coeff > 0.0;
@@ -418,18 +450,17 @@ impl PhiTrainer {
             triplet,
             stable,
         } = objective;
+        round.steps_done += 1;
         if !triplet.loss.is_finite() || !stable.is_finite() {
-            return Err(LearnerError::NonFinite {
-                level: "phi",
-                what: "triplet + stable loss",
-                value: triplet.loss + stable,
-            });
+            round.skipped_steps += 1;
+            // Counted in the metrics (`phi/skipped_nonfinite_steps`); this library does not log.
+            self.stats.skipped_nonfinite_steps += 1;
+            return Ok(());
         }
         self.opt.backward_step(&loss)?;
         for (&c, l) in drawn.iter().zip(per_sample.to_vec1::<f32>()?) {
             round.new_priority[c] = l;
         }
-        round.steps_done += 1;
         round.slice_loss_sum += triplet.loss * b as f64;
         round.slice_samples += b as u64;
         self.stats.triplet = triplet;
@@ -479,7 +510,8 @@ impl PhiTrainer {
         debug_assert!(round.index < self.next_round);
     }
 
-    /// Drops `round` after an error; the store is thawed so ingest goes on.
+    /// Drops `round` after an error or with every step skipped (its priorities are not
+    /// written); the store is thawed so ingest goes on.
     fn abort(&mut self, _round: ActiveRound, store: &mut PhiStore) {
         store.thaw();
     }
