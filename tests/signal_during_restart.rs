@@ -1,0 +1,74 @@
+//! Issue #7: a SIGTERM that reaches `asi train` while a crashed learner waits for its restart
+//! (the launcher's back-off) still stops the run cleanly — the launcher keeps ticking during
+//! the back-off (no blocking sleep), so it sees the signal, stops the actors, sends the
+//! graph-service its Stop, and exits 0 with nothing of the run left running or registered.
+//!
+//! The learner's back-off is 500 ms and the signal follows the crash notice at once, so the
+//! signal normally lands inside it; if the machine is so slow that the restart happens first,
+//! the test checks the same properties of that case (the restarted learner is stopped too).
+
+mod common;
+
+use common::*;
+
+fn learner_starts(dir: &std::path::Path) -> usize {
+    std::fs::read_to_string(dir.join("status").join("learner.starts.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .count()
+}
+
+#[test]
+fn sigterm_while_a_crashed_learner_waits_for_its_restart_stops_the_run_cleanly() {
+    let mut run = Run::start(
+        "signal-in-backoff",
+        "configs/smoke.toml",
+        &["--actors", "2", "--set", "run.max_episodes=1000000"],
+    );
+    run.wait_until("the learner ingested data", |dir| {
+        learner_steps_now(dir) > 0
+    });
+    let run_id = run.run_id();
+    let learner = pid_of(&run.dir, "learner").expect("learner pid file");
+    signal(learner, libc::SIGKILL);
+    run.wait_until("the launcher noticed the crash", |dir| {
+        launcher_log_has(dir, "restarting in")
+    });
+    signal(run.child.id(), libc::SIGTERM);
+    let status = run.wait();
+    let output = run.launcher_output();
+    assert!(status.success(), "launcher exit {status}:\n{output}");
+    assert!(output.contains("stopped by signal"), "{output}");
+    let restarted = learner_starts(&run.dir) > 1;
+    eprintln!("signal landed in the back-off: {}", !restarted);
+    assert_eq!(
+        run.status("graph-service")["stop_reason"],
+        "stop requested",
+        "the graph-service got its Stop and wrote its final state"
+    );
+    for actor in ["actor-0-0", "actor-1-0"] {
+        assert!(
+            as_u64(&run.status(actor), "published_steps") > 0,
+            "{actor} stopped and wrote its status"
+        );
+    }
+    if restarted {
+        assert!(
+            run.status("learner")["stop_reason"].is_string(),
+            "a restarted learner was stopped too"
+        );
+    }
+    for pid in pids(&run.dir) {
+        // SAFETY: signal 0 only checks whether the pid exists.
+        let alive = unsafe { libc::kill(pid as libc::pid_t, 0) } == 0;
+        assert!(!alive, "process {pid} of the run still runs");
+    }
+    assert_eq!(services_of(&run_id), Vec::<String>::new());
+}
+
+/// Whether the launcher's output (`<dir>.launcher.log`, beside the run folder) has `text`.
+fn launcher_log_has(dir: &std::path::Path, text: &str) -> bool {
+    let mut log = dir.as_os_str().to_owned();
+    log.push(".launcher.log");
+    std::fs::read_to_string(log).is_ok_and(|t| t.contains(text))
+}
