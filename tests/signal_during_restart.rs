@@ -6,10 +6,19 @@
 //! The learner's back-off is 500 ms and the signal follows the crash notice at once, so the
 //! signal normally lands inside it; if the machine is so slow that the restart happens first,
 //! the test checks the same properties of that case (the restarted learner is stopped too).
+//!
+//! A SIGTERM just after the restart finds the new learner still restoring its checkpoint, with
+//! no control port yet: the launcher hands it the Stop when its port appears (the channel keeps
+//! the last message), instead of SIGTERMing it after the 120 s service stop wait.
 
 mod common;
 
+use std::sync::Mutex;
+
 use common::*;
+
+/// One training run at a time on the two CI cores.
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn learner_starts(dir: &std::path::Path) -> usize {
     std::fs::read_to_string(dir.join("status").join("learner.starts.jsonl"))
@@ -20,6 +29,7 @@ fn learner_starts(dir: &std::path::Path) -> usize {
 
 #[test]
 fn sigterm_while_a_crashed_learner_waits_for_its_restart_stops_the_run_cleanly() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut run = Run::start(
         "signal-in-backoff",
         "configs/smoke.toml",
@@ -71,4 +81,46 @@ fn launcher_log_has(dir: &std::path::Path, text: &str) -> bool {
     let mut log = dir.as_os_str().to_owned();
     log.push(".launcher.log");
     std::fs::read_to_string(log).is_ok_and(|t| t.contains(text))
+}
+
+#[test]
+fn sigterm_just_after_a_crashed_learner_was_restarted_still_reaches_it_as_a_stop_message() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut run = Run::start(
+        "signal-after-restart",
+        "configs/smoke.toml",
+        &["--actors", "2", "--set", "run.max_episodes=1000000"],
+    );
+    run.wait_until("the learner ingested data", |dir| {
+        learner_steps_now(dir) > 0
+    });
+    let run_id = run.run_id();
+    let first = pid_of(&run.dir, "learner").expect("learner pid file");
+    signal(first, libc::SIGKILL);
+    run.wait_until("the learner restarted", |dir| {
+        pid_of(dir, "learner").is_some_and(|pid| pid != first)
+    });
+    // The new learner is most likely still restoring its checkpoint and has no control port
+    // yet when the launcher sends Stop.
+    signal(run.child.id(), libc::SIGTERM);
+    let status = run.wait();
+    let output = run.launcher_output();
+    assert!(status.success(), "launcher exit {status}:\n{output}");
+    assert!(
+        !output.contains("did not stop on the Stop message"),
+        "every service got the Stop:\n{output}"
+    );
+    for process in ["learner", "graph-service"] {
+        assert_eq!(
+            run.status(process)["stop_reason"],
+            "stop requested",
+            "{process} stopped by the launcher's Stop message"
+        );
+    }
+    for pid in pids(&run.dir) {
+        // SAFETY: signal 0 only checks whether the pid exists.
+        let alive = unsafe { libc::kill(pid as libc::pid_t, 0) } == 0;
+        assert!(!alive, "process {pid} of the run still runs");
+    }
+    assert_eq!(services_of(&run_id), Vec::<String>::new());
 }

@@ -31,6 +31,9 @@ const TICK: Duration = Duration::from_millis(100);
 /// after a Stop message (a checkpoint with a 1 M-step replay buffer takes seconds; SIGTERM
 /// during the write loses only that checkpoint, never an older one).
 const SERVICE_STOP_WAIT: Duration = Duration::from_secs(120);
+/// While the services drain after Stop: how often the Stop is handed to control ports opened
+/// after it was sent.
+const STOP_RECONNECT: Duration = Duration::from_millis(200);
 /// How long service processes may take to open their channels.
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
 
@@ -141,7 +144,8 @@ fn supervise(
 }
 
 /// Actors first (so everything they sent can be drained), then the services: a Stop message,
-/// and SIGTERM for any that has not exited after [`SERVICE_STOP_WAIT`].
+/// and SIGTERM for any that has not exited after [`SERVICE_STOP_WAIT`]. A crashed service
+/// still waiting out its restart back-off is not restarted (its newest checkpoint stands).
 fn shutdown(
     control: &protocol::transport::ValuePublisher<ControlMessage>,
     children: &mut Children,
@@ -150,10 +154,32 @@ fn shutdown(
     if let Err(err) = control.send(ControlMessage::new(1, ControlCommand::Stop)) {
         tracing::warn!("could not send Stop: {err:#}");
     }
-    if !children.wait_for_exit(|_| true, SERVICE_STOP_WAIT) {
+    if !wait_for_services(control, children) {
         tracing::warn!("services did not stop on the Stop message; sending SIGTERM");
     }
     children.stop_kind(|_| true);
+}
+
+/// Waits up to [`SERVICE_STOP_WAIT`] for the services to exit after the Stop; returns whether
+/// they did. Meanwhile the Stop (the control channel keeps the last message) is handed to
+/// control ports opened after it was sent: a learner restarted just before a SIGTERM is still
+/// restoring its checkpoint then, and would otherwise only get SIGTERM at the end of the wait.
+fn wait_for_services(
+    control: &protocol::transport::ValuePublisher<ControlMessage>,
+    children: &mut Children,
+) -> bool {
+    let deadline = Instant::now() + SERVICE_STOP_WAIT;
+    loop {
+        if let Err(err) = control.update_connections() {
+            tracing::debug!("handing the Stop to new control ports: {err:#}");
+        }
+        if children.wait_for_exit(|_| true, STOP_RECONNECT) {
+            return true;
+        }
+        if Instant::now() >= deadline {
+            return false;
+        }
+    }
 }
 
 /// Resolves `asi train`'s arguments into a run context (writes the resolved config). An
