@@ -291,6 +291,8 @@ mod tests {
     #[test]
     fn a_normalised_low_critic_takes_the_bound_and_the_normalised_entropy_target() {
         let mut config = Config::default();
+        assert!(config.learner.low.critic_normalized_action, "the default");
+        config.learner.low.critic_normalized_action = false;
         let spec = NetsSpec::default();
         let plain = low_params(&config, &spec);
         assert_eq!(plain.critic_action_scale, 1.0);

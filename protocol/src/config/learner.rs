@@ -126,12 +126,17 @@ pub struct LowLearnerConfig {
     pub batch_size: usize,
     /// SAC: entropy temperature α (initial value when `auto_alpha`). Default 0.2. Source: ours.
     pub alpha: f64,
-    /// SAC: tune α towards the target entropy −dim(action). Default false. Source: ours.
+    /// SAC: tune α towards the target entropy −dim(action). Default true. Source: ours
+    /// (CleanRL's SAC default; SPEC §6.2 fixes α = 0.2, but on the Ant a fixed 0.2 lets the
+    /// entropy bonus, about 5 per step, swamp the reward −0.1·‖φ(s') − sg‖ (about −0.75): the
+    /// low level stays near-uniform and learns no reaching — docs/RESULTS.md, AntMaze-U).
     pub auto_alpha: bool,
     /// SAC: feed the critics the action divided by the env's action bound (in [−1, 1]) instead
     /// of the raw torque, as the reference code's low critic does (`action / 16`), and take the
-    /// `auto_alpha` target entropy −dim(action) in those normalised units. Default false.
-    /// Source: ours (digest §3.2 for the reference's critic input).
+    /// `auto_alpha` target entropy −dim(action) in those normalised units. Default true.
+    /// Source: ours (digest §3.2 for the reference's critic input): with raw ±16 N·m torques
+    /// the Ant's low critics diverged (Q rose to +1,500 under rewards ≤ 0; docs/RESULTS.md).
+    /// No effect where the bound is 1 (PointMaze, the cheetah).
     pub critic_normalized_action: bool,
     /// SAC: hidden layer widths of policy and critics. Default [256, 256]. Source: supplement.
     pub hidden: Vec<usize>,
@@ -156,8 +161,8 @@ impl Default for LowLearnerConfig {
             lr: 3e-4,
             batch_size: 128,
             alpha: 0.2,
-            auto_alpha: false,
-            critic_normalized_action: false,
+            auto_alpha: true,
+            critic_normalized_action: true,
             hidden: vec![256, 256],
             updates_per_episode: 200,
             updates_per_env_step: None,
