@@ -734,6 +734,7 @@ fn si_metrics(s: &SiStats, si: &SelfImitation) -> Vec<(&'static str, f64)> {
             s.skipped_no_usable_route as f64,
         ),
         ("si/skipped_empty_buffer", s.skipped_empty_buffer as f64),
+        ("si/skipped_nonfinite", s.skipped_nonfinite as f64),
         ("si/buffer_len", si.buffer().len() as f64),
         ("si/buffer_evicted", si.buffer().n_evicted() as f64),
         ("si/buffer_orphaned", si.buffer().n_orphaned() as f64),

@@ -657,6 +657,11 @@ fn save_si(l: &Learner) -> Result<Vec<u8>, String> {
         ("orphaned".to_owned(), p.orphaned.to_string()),
         ("rejected".to_owned(), p.rejected.to_string()),
         ("pending".to_owned(), si.pending().to_string()),
+        // Its own key, not a ninth `stats` entry, so that older checkpoints still load.
+        (
+            "skipped_nonfinite".to_owned(),
+            st.skipped_nonfinite.to_string(),
+        ),
         (
             "stats".to_owned(),
             serde_json::to_string(&counters).map_err(|e| e.to_string())?,
@@ -724,6 +729,11 @@ fn restore_si(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
         rejected: meta(&metadata, "rejected")?,
     };
     let buffer = SiBuffer::from_parts(obs_dim, goal_dim, current.capacity(), parts)?;
+    // Absent (0) in checkpoints written before non-finite SI steps were skipped.
+    let skipped_nonfinite = match metadata.get("skipped_nonfinite") {
+        Some(_) => meta(&metadata, "skipped_nonfinite")?,
+        None => 0,
+    };
     let stats = SiStats {
         rounds_due,
         high_steps,
@@ -733,6 +743,7 @@ fn restore_si(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
         skipped_phi_mismatch,
         skipped_no_usable_route,
         skipped_empty_buffer,
+        skipped_nonfinite,
         ..SiStats::default()
     };
     l.si.restore(buffer, meta(&metadata, "pending")?, stats)

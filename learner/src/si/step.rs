@@ -9,7 +9,10 @@
 //! the level's SAC actor step), not added to the RL losses.
 //!
 //! Skips are counted per level step (a round has two): SI switched off, no answer from the route
-//! source, a graph with another φ version, no usable route left, or an empty buffer.
+//! source, a graph with another φ version, no usable route left, an empty buffer, or a loss that
+//! is NaN or infinite, or whose gradient is (e.g. states so large that the policy or φ overflows
+//! f32; issue #7): then no Adam step is taken, the policy is untouched and the round is done as
+//! usual.
 //!
 //! Low-level policy: the SAC low level's action at `[s_t, φ(s_t), subgoal]` is its deterministic
 //! action `scale · tanh(μ)` — the counterpart of the reference code's deterministic actor, which
@@ -80,6 +83,8 @@ pub enum SiSkip {
     NoUsableRoute,
     /// The buffer holds no entry.
     EmptyBuffer,
+    /// The loss was NaN or infinite: no Adam step, the policy untouched.
+    NonFinite,
 }
 
 /// SI counters and the latest values (metrics `si/*`, `docs/METRICS.md`).
@@ -111,6 +116,8 @@ pub struct SiStats {
     pub skipped_no_usable_route: u64,
     /// Level steps skipped because the buffer was empty.
     pub skipped_empty_buffer: u64,
+    /// Level steps skipped because their loss was NaN or infinite (no Adam step).
+    pub skipped_nonfinite: u64,
 }
 
 impl SiStats {
@@ -121,6 +128,7 @@ impl SiStats {
             + self.skipped_phi_mismatch
             + self.skipped_no_usable_route
             + self.skipped_empty_buffer
+            + self.skipped_nonfinite
     }
 
     fn count_skip(&mut self, skip: SiSkip) {
@@ -130,6 +138,7 @@ impl SiStats {
             SiSkip::PhiMismatch => self.skipped_phi_mismatch += 1,
             SiSkip::NoUsableRoute => self.skipped_no_usable_route += 1,
             SiSkip::EmptyBuffer => self.skipped_empty_buffer += 1,
+            SiSkip::NonFinite => self.skipped_nonfinite += 1,
         }
     }
 }
@@ -344,10 +353,9 @@ impl SelfImitation {
             return Ok(Err(SiSkip::NoUsableRoute));
         }
         match level {
-            Level::High => self.high_step(&usable, nets, rng)?,
-            Level::Low => self.low_step(&usable, nets)?,
+            Level::High => self.high_step(&usable, nets, rng),
+            Level::Low => self.low_step(&usable, nets),
         }
-        Ok(Ok(()))
     }
 
     /// The sampled rows and their φ(s_t), φ(s_0), φ(g̃) under the current encoder (one forward
@@ -439,13 +447,14 @@ impl SelfImitation {
         out
     }
 
-    /// The high-level step: L_hi on a reparameterised sample of π_hi([s_t, g]).
+    /// The high-level step: L_hi on a reparameterised sample of π_hi([s_t, g]); skipped when
+    /// L_hi is not finite.
     fn high_step(
         &mut self,
         usable: &Usable,
         nets: &mut Networks,
         rng: &mut impl Rng,
-    ) -> Result<(), LearnerError> {
+    ) -> Result<Result<(), SiSkip>, LearnerError> {
         let cpu = Device::Cpu;
         let m = usable.n;
         let obs = Tensor::from_slice(&usable.obs, (m, self.obs_dim), &cpu)?;
@@ -460,16 +469,23 @@ impl SelfImitation {
         let target = Tensor::from_slice(&usable.target, (m, 2), &cpu)?;
         let phi = Tensor::from_slice(&usable.phi, (m, 2), &cpu)?;
         let (loss, stats) = high_si_loss(&action, &target, &phi, self.params.alpha)?;
+        if !finite_with_gradient(&loss, stats.loss, nets)? {
+            return Ok(Err(SiSkip::NonFinite));
+        }
         nets.high
             .policy_step(&loss, "self-imitation loss", stats.loss)?;
         self.stats.high = stats;
         self.stats.high_steps += 1;
-        Ok(())
+        Ok(Ok(()))
     }
 
     /// The low-level step: L_lo between the action at the target and the (detached) actions at
-    /// the reference route points.
-    fn low_step(&mut self, usable: &Usable, nets: &mut Networks) -> Result<(), LearnerError> {
+    /// the reference route points; skipped when L_lo is not finite.
+    fn low_step(
+        &mut self,
+        usable: &Usable,
+        nets: &mut Networks,
+    ) -> Result<Result<(), SiSkip>, LearnerError> {
         let cpu = Device::Cpu;
         let m = usable.n;
         let u = self.params.n_refs as usize;
@@ -489,12 +505,37 @@ impl SelfImitation {
         let action_dim = reference.dim(1)?;
         let reference = reference.reshape((m, u, action_dim))?;
         let (loss, stats) = low_si_loss(&aligned, &reference, self.params.beta)?;
+        if !finite_with_gradient(&loss, stats.loss, nets)? {
+            return Ok(Err(SiSkip::NonFinite));
+        }
         nets.low
             .policy_step(&loss, "self-imitation loss", stats.loss)?;
         self.stats.low = stats;
         self.stats.low_steps += 1;
-        Ok(())
+        Ok(Ok(()))
     }
+}
+
+/// Whether `loss` (whose value is `value`) and its gradient for every policy variable are
+/// finite. A finite loss can still have a non-finite gradient — π_lo's tanh saturated by
+/// overflowing pre-activations gives a loss of 0 and a gradient with ∞ · 0 in it — which the
+/// Adam step would write into the weights. The gradient is computed here once more than needed
+/// (the level's `policy_step` runs its own backward pass); an SI step is rare next to the SAC
+/// updates.
+fn finite_with_gradient(loss: &Tensor, value: f64, nets: &Networks) -> Result<bool, LearnerError> {
+    if !value.is_finite() {
+        return Ok(false);
+    }
+    let grads = loss.backward()?;
+    for var in nets.policy_vm.all_vars() {
+        if let Some(grad) = grads.get(var.as_tensor()) {
+            let values = grad.flatten_all()?.to_vec1::<f32>()?;
+            if !values.iter().all(|v| v.is_finite()) {
+                return Ok(false);
+            }
+        }
+    }
+    Ok(true)
 }
 
 /// π_lo's deterministic action at `[base, subgoal]` (`base = [s_t, φ(s_t)]`).
