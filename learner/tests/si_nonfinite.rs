@@ -10,7 +10,11 @@
 
 mod common;
 
+use std::fs;
+use std::path::PathBuf;
+
 use common::*;
+use learner::learner::checkpoint::{checksum, Manifest, MANIFEST};
 use learner::si::SiStats;
 use learner::{Learner, RouteSource, RoutesReply};
 use protocol::graph::{LatentPoint, RouteAnswer, RouteQuery};
@@ -218,15 +222,56 @@ fn self_imitation_trains_normally_once_the_bad_entries_are_evicted() {
     assert_ne!(policy_values(&l, "low_policy"), low0, "π_lo trained");
 }
 
+/// Saves `l` into a fresh folder named after `name`; returns the folder and the checkpoint.
+fn save(l: &Learner, name: &str) -> (PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("asi-si-nonfinite-{}-{name}", std::process::id()));
+    let _ = fs::remove_dir_all(&dir);
+    let saved = l.save_checkpoint(&config(), &dir).unwrap();
+    (dir, saved.path)
+}
+
 #[test]
 fn the_non_finite_skip_count_survives_a_checkpoint() {
     let mut l = fed_huge_states();
     l.train_self_imitation(&mut HugeRoutes).unwrap();
-    let dir = std::env::temp_dir().join(format!("asi-si-nonfinite-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let saved = l.save_checkpoint(&config(), &dir).unwrap();
-    let (restored, _) = Learner::restore_checkpoint(&config(), DIMS, &saved.path).unwrap();
-    std::fs::remove_dir_all(&dir).unwrap();
+    let (dir, ckpt) = save(&l, "roundtrip");
+    let (restored, _) = Learner::restore_checkpoint(&config(), DIMS, &ckpt).unwrap();
+    fs::remove_dir_all(&dir).unwrap();
     assert_eq!(stats(&restored).skipped_nonfinite, 2);
     assert_eq!(stats(&restored).skipped(), stats(&l).skipped());
+}
+
+#[test]
+fn a_checkpoint_written_before_the_counter_existed_loads_with_it_at_zero() {
+    let mut l = fed_huge_states();
+    l.train_self_imitation(&mut HugeRoutes).unwrap();
+    let (dir, ckpt) = save(&l, "older");
+    // An older build wrote no `skipped_nonfinite` key: rename it (same length, so the
+    // safetensors header keeps its size) and re-seal the manifest.
+    let file = ckpt.join("si.safetensors");
+    let bytes = fs::read(&file).unwrap();
+    // The key is the only place the name occurs (the other counters are an unnamed list).
+    let (key, other) = (b"skipped_nonfinite", b"unknown_key_xxxxx");
+    let at = bytes
+        .windows(key.len())
+        .position(|w| w == key)
+        .expect("the key is written");
+    let mut older = bytes.clone();
+    older[at..at + key.len()].copy_from_slice(other);
+    fs::write(&file, &older).unwrap();
+    let mut manifest: Manifest =
+        serde_json::from_slice(&fs::read(ckpt.join(MANIFEST)).unwrap()).unwrap();
+    let entry = manifest
+        .files
+        .iter_mut()
+        .find(|f| f.name == "si.safetensors")
+        .unwrap();
+    entry.checksum = format!("{:016x}", checksum(&older));
+    fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&manifest).unwrap()).unwrap();
+    let (restored, _) = Learner::restore_checkpoint(&config(), DIMS, &ckpt).unwrap();
+    fs::remove_dir_all(&dir).unwrap();
+    let (s, before) = (stats(&restored), stats(&l));
+    assert_eq!(s.skipped_nonfinite, 0);
+    assert_eq!((s.rounds_due, s.skipped()), (before.rounds_due, 0));
+    assert_eq!(restored.self_imitation().buffer().len(), 30);
 }
