@@ -10,6 +10,9 @@
 //! A SIGTERM just after the restart finds the new learner still restoring its checkpoint, with
 //! no control port yet: the launcher hands it the Stop when its port appears (the channel keeps
 //! the last message), instead of SIGTERMing it after the 120 s service stop wait.
+//!
+//! A SIGTERM while the launcher still waits for learner and graph-service to be ready (before
+//! any actor runs) stops them the same way: Stop message, exit 0, nothing left behind.
 
 mod common;
 
@@ -115,6 +118,64 @@ fn sigterm_just_after_a_crashed_learner_was_restarted_still_reaches_it_as_a_stop
             run.status(process)["stop_reason"],
             "stop requested",
             "{process} stopped by the launcher's Stop message"
+        );
+    }
+    for pid in pids(&run.dir) {
+        // SAFETY: signal 0 only checks whether the pid exists.
+        let alive = unsafe { libc::kill(pid as libc::pid_t, 0) } == 0;
+        assert!(!alive, "process {pid} of the run still runs");
+    }
+    assert_eq!(services_of(&run_id), Vec::<String>::new());
+}
+
+/// Whether `process` has written its ready file.
+fn is_ready(dir: &std::path::Path, process: &str) -> bool {
+    dir.join("status").join(format!("{process}.ready")).exists()
+}
+
+#[test]
+fn sigterm_while_the_launcher_waits_for_the_services_to_be_ready_stops_them_in_order() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let mut run = Run::start(
+        "signal-while-starting",
+        "configs/smoke.toml",
+        &["--actors", "2", "--set", "run.max_episodes=1000000"],
+    );
+    // Both services spawned (pid files are written at spawn), the learner not ready yet: poll
+    // tightly, the window is its start-up (building networks, opening channels).
+    loop {
+        let spawned =
+            pid_of(&run.dir, "learner").is_some() && pid_of(&run.dir, "graph-service").is_some();
+        if spawned || run.child.try_wait().unwrap().is_some() {
+            break;
+        }
+        run.check_watchdog("the services spawned");
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let before_ready = !is_ready(&run.dir, "learner") || !is_ready(&run.dir, "graph-service");
+    signal(run.child.id(), libc::SIGTERM);
+    let run_id = run.run_id();
+    let status = run.wait();
+    let output = run.launcher_output();
+    eprintln!("signal landed before both services were ready: {before_ready}");
+    assert!(status.success(), "launcher exit {status}:\n{output}");
+    assert!(output.contains("stopped by signal"), "{output}");
+    if before_ready {
+        assert!(output.contains("while starting"), "{output}");
+        assert!(
+            pid_of(&run.dir, "actor-0").is_none(),
+            "no actor was started:\n{output}"
+        );
+    }
+    assert!(
+        !output.contains("did not stop on the Stop message"),
+        "the services stopped on the Stop:\n{output}"
+    );
+    for process in ["learner", "graph-service"] {
+        assert_eq!(
+            run.status(process)["stop_reason"],
+            "stop requested",
+            "{process} stopped by the launcher's Stop message, not left to notice it was gone"
         );
     }
     for pid in pids(&run.dir) {

@@ -5,7 +5,8 @@
 //!
 //! Shutdown order matters for "nothing lost": actors stop first (SIGTERM; they finish the chunk
 //! in hand), then the learner and graph-service get a Stop message and drain what the actors
-//! sent before they exit.
+//! sent before they exit. A signal, failure or timeout while the services are still starting
+//! stops them the same way (Stop, then SIGTERM) before the launcher exits.
 
 mod children;
 mod metrics;
@@ -37,6 +38,13 @@ const STOP_RECONNECT: Duration = Duration::from_millis(200);
 /// How long service processes may take to open their channels.
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
 
+/// How the wait for the services' readiness ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Startup {
+    Ready,
+    Signal,
+}
+
 /// Why the supervisor loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Ending {
@@ -56,7 +64,19 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let mut children = Children::new(&ctx)?;
     children.spawn(ChildKind::GraphService)?;
     children.spawn(ChildKind::Learner)?;
-    wait_until_ready(&ctx, &node, &mut children)?;
+    let started = wait_until_ready(&ctx, &node, &mut children);
+    if !matches!(started, Ok(Startup::Ready)) {
+        // Not left to notice on their own that the launcher is gone: stopped in order, and
+        // their iceoryx2 resources cleaned.
+        shutdown(&control, &mut children);
+        clean_stale_resources(&node);
+        started?;
+        tracing::info!(
+            "stopped by signal while starting; run folder {}",
+            ctx.run_dir.display()
+        );
+        return Ok(());
+    }
     for id in 0..config.run.n_actors as u32 {
         children.spawn(ChildKind::Actor(id))?;
     }
@@ -84,15 +104,17 @@ fn clean_stale_resources(node: &Node<protocol::transport::Ipc>) {
     tracing::debug!(?state, "cleaned iceoryx2 resources of dead nodes");
 }
 
+/// Waits until learner and graph-service report ready, or a signal arrives; `Err` when one of
+/// them exits first or [`STARTUP_TIMEOUT`] passes.
 fn wait_until_ready(
     ctx: &RunContext,
     node: &Node<protocol::transport::Ipc>,
     children: &mut Children,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Startup> {
     let start = Instant::now();
     while !(ctx.is_ready("learner") && ctx.is_ready("graph-service")) {
         if node.wait(TICK).is_err() {
-            bail!("interrupted while starting");
+            return Ok(Startup::Signal);
         }
         if let Some(failure) = children.check_services()? {
             bail!(failure);
@@ -104,7 +126,7 @@ fn wait_until_ready(
             );
         }
     }
-    Ok(())
+    Ok(Startup::Ready)
 }
 
 fn supervise(
