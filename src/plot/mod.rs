@@ -8,7 +8,8 @@
 //! `…-seed3`, `…_s3`), so `u-asi_seed-0` and `u-asi_seed-1` form the arm `u-asi`.
 //! Aggregation: every seed's curve is linearly interpolated onto a common grid from 0 to the
 //! smallest final x among the arm's seeds (no extrapolation), then mean and
-//! `t(0.975, n−1) · sd / √n` per grid point.
+//! `t(0.975, n−1) · sd / √n` per grid point; the drawn band is clipped to [0, 1] when every
+//! value lies in it (rates and fractions cannot leave it).
 //!
 //! Also used by the launcher to keep `run_dir/plots/curves.png` current during a run.
 
@@ -41,6 +42,31 @@ pub struct Band {
     pub mean: Vec<f64>,
     pub half_width: Vec<f64>,
     pub n_seeds: usize,
+    /// `(0, 1)` when every value of every seed lies in [0, 1] (a rate or fraction: success,
+    /// coverage): the drawn band is clipped to it, since the metric cannot leave it.
+    pub clip: Option<(f64, f64)>,
+}
+
+impl Band {
+    /// Lower edge of the band at each grid point (clipped to [`Band::clip`]).
+    pub fn lower(&self) -> Vec<f64> {
+        let lo = self.clip.map_or(f64::NEG_INFINITY, |c| c.0);
+        self.mean
+            .iter()
+            .zip(&self.half_width)
+            .map(|(m, h)| (m - h).max(lo))
+            .collect()
+    }
+
+    /// Upper edge of the band at each grid point (clipped to [`Band::clip`]).
+    pub fn upper(&self) -> Vec<f64> {
+        let hi = self.clip.map_or(f64::INFINITY, |c| c.1);
+        self.mean
+            .iter()
+            .zip(&self.half_width)
+            .map(|(m, h)| (m + h).min(hi))
+            .collect()
+    }
 }
 
 /// Reads `metric` against `x_key` from `run_dir/metrics.jsonl`. Points are kept in file order
@@ -151,6 +177,10 @@ pub fn aggregate(seeds: &[Series]) -> Option<Band> {
         mean: Vec::new(),
         half_width: Vec::new(),
         n_seeds: n,
+        clip: seeds
+            .iter()
+            .all(|s| s.y.iter().all(|y| (0.0..=1.0).contains(y)))
+            .then_some((0.0, 1.0)),
     };
     for k in 0..steps {
         let x = if steps == 1 {
@@ -344,12 +374,8 @@ fn draw_panel<'a>(
         .map(|(_, b)| b.x[0])
         .fold(f64::INFINITY, f64::min)
         .min(0.0);
-    let lows = bands
-        .iter()
-        .flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m - h));
-    let highs = bands
-        .iter()
-        .flat_map(|(_, b)| b.mean.iter().zip(&b.half_width).map(|(m, h)| m + h));
+    let lows = bands.iter().flat_map(|(_, b)| b.lower());
+    let highs = bands.iter().flat_map(|(_, b)| b.upper());
     let (mut y_min, mut y_max) = (
         lows.fold(f64::INFINITY, f64::min).min(0.0),
         highs.fold(f64::NEG_INFINITY, f64::max),
@@ -409,17 +435,15 @@ fn draw_panel<'a>(
             let mut polygon: Vec<(i32, i32)> = band
                 .x
                 .iter()
-                .zip(&band.mean)
-                .zip(&band.half_width)
-                .map(|((x, m), h)| (px(*x), py(m + h)))
+                .zip(band.upper())
+                .map(|(x, y)| (px(*x), py(y)))
                 .collect();
             polygon.extend(
                 band.x
                     .iter()
-                    .zip(&band.mean)
-                    .zip(&band.half_width)
+                    .zip(band.lower())
                     .rev()
-                    .map(|((x, m), h)| (px(*x), py(m - h))),
+                    .map(|(x, y)| (px(*x), py(y))),
             );
             root.draw(&Polygon::new(polygon, color.mix(0.2).filled()))?;
         }
@@ -520,6 +544,37 @@ mod tests {
         let x = band.x[k];
         assert!((band.mean[k] - (0.1 * x + 0.2 * x + 0.3 * x) / 3.0).abs() < 1e-9);
         assert_eq!(band.half_width[0], 0.0, "all seeds agree at x = 0");
+    }
+
+    #[test]
+    fn a_band_of_rates_is_clipped_to_zero_and_one_and_other_bands_are_not() {
+        // Success rates 1, 1, 0.7 at the end: mean 0.9, sd √0.03, half-width
+        // 4.303 · √0.03 / √3 = 0.4303, so the upper edge 1.33 is clipped to 1 and the lower
+        // edge 0.4697 is not. At x = 5 (0.5, 0.5, 0.35) the band lies inside [0, 1].
+        let seeds = [
+            series(&[(0.0, 0.0), (10.0, 1.0)]),
+            series(&[(0.0, 0.0), (10.0, 1.0)]),
+            series(&[(0.0, 0.0), (10.0, 0.7)]),
+        ];
+        let band = aggregate(&seeds).unwrap();
+        assert_eq!(band.clip, Some((0.0, 1.0)));
+        let h = *band.half_width.last().unwrap();
+        assert!((h - 0.4303).abs() < 1e-4, "{h}");
+        assert_eq!(*band.upper().last().unwrap(), 1.0, "0.9 + 0.43 clipped");
+        assert!((band.lower().last().unwrap() - (0.9 - h)).abs() < 1e-12);
+        let k = band.x.iter().position(|x| *x >= 5.0).unwrap();
+        let (m, hk) = (band.mean[k], band.half_width[k]);
+        assert!(m - hk > 0.0 && m + hk < 1.0, "mid-run band inside [0, 1]");
+        assert_eq!((band.lower()[k], band.upper()[k]), (m - hk, m + hk));
+        // A metric that leaves [0, 1] (a Q value) keeps its band as computed.
+        let q = aggregate(&[
+            series(&[(0.0, -5.0), (10.0, 2.0)]),
+            series(&[(0.0, -3.0), (10.0, 0.5)]),
+        ])
+        .unwrap();
+        assert_eq!(q.clip, None);
+        let m = *q.mean.last().unwrap();
+        assert!((q.upper().last().unwrap() - (m + q.half_width.last().unwrap())).abs() < 1e-12);
     }
 
     #[test]
