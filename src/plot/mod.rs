@@ -619,7 +619,7 @@ mod tests {
         assert_eq!(s, series(&[(0.0, 0.5), (10.0, 0.2), (30.0, 0.4)]));
         std::fs::write(dir.join("metrics.jsonl"), "not json\n").unwrap();
         assert!(read_series(&dir, "x", "m").is_err());
-        let figure = build_figure(&[dir.clone()], "x", &["m".to_owned()]);
+        let figure = build_figure(std::slice::from_ref(&dir), "x", &["m".to_owned()]);
         assert!(figure.is_err());
         std::fs::remove_dir_all(&dir).unwrap();
     }
