@@ -81,5 +81,8 @@ fn fr_episodes_and_si_steps_run_when_on_and_stay_at_zero_when_off() {
     assert_eq!(sum(&m, "fr/episodes"), 0.0, "{m:?}");
     assert_eq!(sum(&m, "fr/waypoint_decisions"), 0.0, "{m:?}");
     assert_eq!(sum(&m, "si/steps"), 0.0, "{m:?}");
-    assert_eq!(sum(&m, "si/buffer_len"), 0.0, "{m:?}");
+    assert!(
+        sum(&m, "si/buffer_len") > 0.0,
+        "filled with SI off too: {m:?}"
+    );
 }

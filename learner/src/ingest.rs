@@ -23,9 +23,10 @@
 //! [`ChunkOutcome::far_goal_success`] reports both at the episode's end (see
 //! [`crate::schedule`]).
 //!
-//! SI buffer ([`crate::si::buffer`]): when SI is on, every stored step also adds an entry
-//! `(s_0, s_t = obs, g = goal)`; the episode's s_0 is the obs of the first step the learner
-//! stored for it (the true s_0 unless chunk 0 was lost), registered once per episode.
+//! SI buffer ([`crate::si::buffer`]): every stored step also adds an entry
+//! `(s_0, s_t = obs, g = goal)`, SI on or off (so a run can switch SI on later, see
+//! [`crate::si::SelfImitation::buffer_mut`]); the episode's s_0 is the obs of the first step the
+//! learner stored for it (the true s_0 unless chunk 0 was lost), registered once per episode.
 //!
 //! Memory bound: at most [`MAX_OPEN_EPISODES`] open episodes (a killed actor never sends its
 //! last chunk); beyond that the least recently touched one is abandoned and counted. Finished
@@ -135,8 +136,8 @@ pub struct Buffers<'a> {
     pub high: &'a mut HighReplay,
     /// φ observation store (an episode's states when it ends).
     pub phi: &'a mut PhiStore,
-    /// SI buffer (every step), `None` when SI is off.
-    pub si: Option<&'a mut SiBuffer>,
+    /// SI buffer (every step, SI on or off).
+    pub si: &'a mut SiBuffer,
 }
 
 /// Per-episode continuity and open segments.
@@ -186,12 +187,7 @@ impl Episodes {
         steps: &[StepView],
         buffers: Buffers<'_>,
     ) -> ChunkOutcome {
-        let Buffers {
-            low,
-            high,
-            phi,
-            mut si,
-        } = buffers;
+        let Buffers { low, high, phi, si } = buffers;
         self.clock += 1;
         let key = (header.actor_id, header.episode_id);
         let entry = self.open.entry(key).or_default();
@@ -210,9 +206,7 @@ impl Episodes {
             outcome.high_added += advance_segment(&mut entry.segment, step, high);
             entry.states.push_step(step.obs, step.next_obs);
             entry.success |= step.success;
-            if let Some(si) = si.as_deref_mut() {
-                push_si(si, &mut entry.si_episode, step);
-            }
+            push_si(si, &mut entry.si_episode, step);
         }
         if header.flags.contains(TrajectoryFlags::EPISODE_END) {
             outcome.high_added += close_at_end(&mut entry.segment, steps, high);

@@ -264,7 +264,7 @@ impl Learner {
             low: &mut self.low_replay,
             high: &mut self.high_replay,
             phi: &mut self.phi_store,
-            si: self.si.buffer_for_ingest(),
+            si: self.si.buffer_mut(),
         };
         let outcome = self.episodes.store(header, continuity, &steps, buffers);
         self.count_stored(header, steps.len() as u64, &outcome);

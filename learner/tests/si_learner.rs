@@ -271,9 +271,17 @@ fn routes_too_short_for_the_low_level_train_only_the_high_level() {
 }
 
 #[test]
-fn with_self_imitation_off_nothing_is_stored_and_due_rounds_count_as_skipped() {
+fn with_self_imitation_off_the_buffer_still_fills_and_due_rounds_count_as_skipped() {
     let mut l = learner_after(&config(false), 4);
-    assert_eq!(l.self_imitation().buffer().len(), 0);
+    // Filled as with SI on, so that the run can be resumed with SI on (tests/serial_resume.rs).
+    assert_eq!(
+        l.self_imitation().buffer().len(),
+        learner_after(&config(true), 4)
+            .self_imitation()
+            .buffer()
+            .len()
+    );
+    assert!(!l.self_imitation().buffer().is_empty());
     assert_eq!(l.si_pending(), 0);
     assert_eq!(
         l.train_self_imitation(&mut StraightRoutes::new(6)).unwrap(),

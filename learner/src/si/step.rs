@@ -225,9 +225,12 @@ impl SelfImitation {
         &self.buffer
     }
 
-    /// The buffer to fill while ingesting; `None` when SI is off (nothing is stored then).
-    pub fn buffer_for_ingest(&mut self) -> Option<&mut SiBuffer> {
-        self.params.enabled.then_some(&mut self.buffer)
+    /// The buffer to fill while ingesting. It is filled whether SI is on or off, as in the
+    /// reference code (every step of every episode): filling draws no random number and changes
+    /// no policy, so runs with SI on and off stay identical until `si_start_episode`, and a run
+    /// with SI off can be resumed with SI on and go on exactly as one with SI on from the start.
+    pub fn buffer_mut(&mut self) -> &mut SiBuffer {
+        &mut self.buffer
     }
 
     /// Counters and latest values.
