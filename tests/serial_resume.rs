@@ -13,6 +13,19 @@
 //! there; a separate test uses 0.1-wide cells and one φ re-map in 12 episodes, where the graph
 //! grows from 84 to 210 nodes and such a resume diverges (checked by hand: the metrics differ
 //! from episode 12 on).
+//!
+//! Forked ablation arms: the experiments run one shared prefix with frontier-reaching (FR) and
+//! self-imitation (SI) off (HESS) and fork the other arms from copies of its folder (`cp -a`),
+//! resumed with the switches changed at the episode where FR or SI starts. A test checks that
+//! the HESS prefix copied at FR's start (8 in the smoke config) and resumed with FR on, then
+//! copied at SI's start (10) and resumed with SI on, ends with the `metrics.jsonl` and
+//! `eval.jsonl` of a run with both on from the start, as does a copy that switches both on
+//! early (at 4); that FR episodes and SI steps happen only after the forks; that the prefix
+//! names no path of its own folder and is left untouched by its copy's resume; and, so that
+//! the equality is not vacuous, that the prefixes continued with FR (SI) off part from the
+//! reference on the first metrics line after FR's (SI's) start. Checked by hand to fail when
+//! the SI buffer is not filled with SI off (the fork starts SI with an empty buffer) and when
+//! an FR-on actor draws its FR number while `fr_prob` is 0.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -149,36 +162,46 @@ fn assert_same_lines(what: &str, uninterrupted: &[String], resumed: &[String]) {
     );
 }
 
+/// Launches `asi train --serial` in `dir` to `episodes` (see [`serial_train`]); checks that it
+/// resumed exactly when `resumes` (restoring the serial state and replaying the
+/// graph-service's inputs), started fresh otherwise, and stopped at `episodes`. `what` names
+/// the launch in messages. Returns its stderr.
+fn launch(dir: &Path, episodes: u64, extra: &[String], resumes: bool, what: &str) -> String {
+    let output = serial_train(dir, episodes, extra);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(
+        stdout.contains("resuming from checkpoint"),
+        resumes,
+        "{what}: resumes {resumes}: {stdout}"
+    );
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(
+        stderr.contains("bit-exact resume")
+            && stderr.contains("graph-service inputs since its checkpoint replayed"),
+        resumes,
+        "{what}: a resume restores the serial state exactly and replays the graph-service's \
+         inputs: {stderr}"
+    );
+    let written = lines(&dir.join("metrics.jsonl"));
+    assert_eq!(
+        written.last().map(|l| episodes_of(l)),
+        Some(episodes),
+        "{what} should stop at {episodes} episodes"
+    );
+    stderr
+}
+
 /// Launches `asi train --serial` in `dir` once per stop of `stops`, then once to
 /// [`N_EPISODES`]; checks that each launch ended where it should and that every launch after
 /// the first resumed.
 fn run_chain(dir: &Path, stops: &[u64], extra: &[String]) {
     for (i, &episodes) in stops.iter().chain([&N_EPISODES]).enumerate() {
-        let output = serial_train(dir, episodes, extra);
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        assert_eq!(
-            stdout.contains("resuming from checkpoint"),
-            i > 0,
-            "launch {i} of {stops:?}: only launches after the first resume: {stdout}"
-        );
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        assert_eq!(
-            stderr.contains("bit-exact resume")
-                && stderr.contains("graph-service inputs since its checkpoint replayed"),
-            i > 0,
-            "launch {i} of {stops:?}: a resume restores the serial state exactly and replays the \
-             graph-service's inputs: {stderr}"
-        );
+        let what = format!("launch {i} of {stops:?}");
+        let stderr = launch(dir, episodes, extra, i > 0, &what);
         let n_written = stderr.matches("serial checkpoint written").count();
         assert!(
             n_written >= if extra.is_empty() { 1 } else { 2 },
-            "launch {i} of {stops:?}: {n_written} serial checkpoints written"
-        );
-        let written = lines(&dir.join("metrics.jsonl"));
-        assert_eq!(
-            written.last().map(|l| episodes_of(l)),
-            Some(episodes),
-            "launch {i} of {stops:?} should stop at {episodes} episodes"
+            "{what}: {n_written} serial checkpoints written"
         );
     }
 }
@@ -378,5 +401,182 @@ fn a_resume_between_phi_re_maps_keeps_the_graph_of_the_last_re_map() {
         "metrics.jsonl, fine graph stopped at 10",
         &expected,
         &lines(&split.join("metrics.jsonl")),
+    );
+}
+
+/// Episodes of the forked runs: past self-imitation's start in the smoke config, with an
+/// evaluation (at 12) after both forks.
+const N_FORKED: u64 = 16;
+/// Where a copy of the shared prefix switches frontier-reaching and self-imitation on early,
+/// before either starts.
+const EARLY_SWITCH: u64 = 4;
+
+/// `--set` flags for an ablation arm: frontier-reaching and self-imitation on or off.
+fn arm_flags(frontier_reaching: bool, self_imitation: bool) -> Vec<String> {
+    [
+        format!("asi.frontier_reaching={frontier_reaching}"),
+        format!("asi.self_imitation={self_imitation}"),
+    ]
+    .into_iter()
+    .flat_map(|set| ["--set".to_owned(), set])
+    .collect()
+}
+
+/// Every file under `dir` with its contents, by path, sorted; panics on anything but plain
+/// files and folders (a link could lead a copy back to the original).
+fn files_of(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        let kind = std::fs::symlink_metadata(&path).unwrap().file_type();
+        if kind.is_dir() {
+            files.extend(files_of(&path));
+        } else {
+            assert!(kind.is_file(), "{}: not a plain file", path.display());
+            let bytes = std::fs::read(&path).unwrap();
+            files.push((path, bytes));
+        }
+    }
+    files.sort();
+    files
+}
+
+/// Forks the run in `from` as the experiments do, with `cp -a` of the whole folder to `to`,
+/// after checking that no file of it names its folder (the copy must be self-contained).
+fn fork(from: &Path, to: &Path) {
+    let name = from.to_str().unwrap().as_bytes();
+    for (path, bytes) in files_of(from) {
+        assert!(
+            !bytes.windows(name.len()).any(|w| w == name),
+            "{} names its run folder: a copy would lead back to the original",
+            path.display()
+        );
+    }
+    let status = Command::new("cp")
+        .arg("-a")
+        .arg(from)
+        .arg(to)
+        .status()
+        .unwrap();
+    assert!(
+        status.success(),
+        "cp -a {} {}",
+        from.display(),
+        to.display()
+    );
+}
+
+/// The sum over actors (or the one learner value) of the metric whose key ends with `suffix`.
+fn metric_sum(line: &str, suffix: &str) -> f64 {
+    let value: serde_json::Map<String, serde_json::Value> = serde_json::from_str(line).unwrap();
+    let found: Vec<f64> = value
+        .iter()
+        .filter(|(k, _)| k.ends_with(suffix))
+        .map(|(_, v)| v.as_f64().unwrap())
+        .collect();
+    assert!(!found.is_empty(), "no metric *{suffix} in {line}");
+    found.iter().sum()
+}
+
+/// The index of the first metrics line written after `episodes` episodes.
+fn first_line_after(metrics: &[String], episodes: u64) -> usize {
+    metrics
+        .iter()
+        .position(|l| episodes_of(l) > episodes)
+        .unwrap()
+}
+
+/// The index of the first line where `a` and `b` differ, if any.
+fn first_difference(a: &[String], b: &[String]) -> Option<usize> {
+    (0..a.len().max(b.len())).find(|&i| a.get(i) != b.get(i))
+}
+
+#[test]
+fn ablation_arms_forked_from_a_shared_serial_prefix_equal_runs_started_with_their_flags() {
+    let tmp = TempDir::new("fork");
+    let start = Instant::now();
+    let smoke = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/smoke.toml");
+    let asi = protocol::Config::load(Some(&smoke), &[]).unwrap().asi;
+    let (fr_start, si_start) = (asi.fr_start_episode, asi.si_start_episode);
+    let stops = [EARLY_SWITCH, fr_start, si_start, N_FORKED];
+    assert!(
+        stops.windows(2).all(|w| w[0] < w[1]) && stops.iter().all(|s| s.is_multiple_of(2)),
+        "the forks ({stops:?}) must be in order and fall between two episodes of each actor"
+    );
+    let reference_dir = tmp.0.join("reference");
+    launch(&reference_dir, N_FORKED, &[], false, "reference");
+    let reference = lines(&reference_dir.join("metrics.jsonl"));
+    let reference_eval = lines(&reference_dir.join("eval.jsonl"));
+
+    // The shared prefix runs as HESS (both off); one copy switches both on early, one turns
+    // frontier-reaching on at its start, and a copy of that one turns self-imitation on at
+    // its start.
+    let (hess, early) = (tmp.0.join("hess"), tmp.0.join("early"));
+    let (fr, both) = (tmp.0.join("fr"), tmp.0.join("fr-si"));
+    launch(&hess, EARLY_SWITCH, &arm_flags(false, false), false, "HESS");
+    fork(&hess, &early);
+    launch(&hess, fr_start, &arm_flags(false, false), true, "HESS");
+    fork(&hess, &fr);
+    let prefix = files_of(&hess);
+    launch(&fr, si_start, &arm_flags(true, false), true, "FR fork");
+    assert!(
+        files_of(&hess) == prefix,
+        "resuming the copy must leave the original folder untouched"
+    );
+    fork(&fr, &both);
+    launch(&both, N_FORKED, &[], true, "FR+SI fork");
+    launch(&early, N_FORKED, &[], true, "early switch");
+    for (what, dir) in [
+        (format!("forked at {fr_start} and {si_start}"), &both),
+        (format!("switched on at {EARLY_SWITCH}"), &early),
+    ] {
+        assert_same_lines(
+            &format!("metrics.jsonl, {what}"),
+            &reference,
+            &lines(&dir.join("metrics.jsonl")),
+        );
+        assert_same_lines(
+            &format!("eval.jsonl, {what}"),
+            &reference_eval,
+            &lines(&dir.join("eval.jsonl")),
+        );
+    }
+
+    // Not vacuous: FR episodes and SI steps happen after the forks, not before.
+    let at = |episodes| &reference[first_line_after(&reference, episodes) - 1];
+    let last = reference.last().unwrap();
+    assert_eq!(metric_sum(at(fr_start), "/actor/fr/episodes"), 0.0);
+    assert!(metric_sum(last, "/actor/fr/episodes") > 0.0, "{last}");
+    assert_eq!(metric_sum(at(si_start), "learner/si/steps"), 0.0);
+    assert!(metric_sum(last, "learner/si/steps") > 0.0, "{last}");
+    // The flags matter: the prefixes continued with FR (SI) off part from the reference on
+    // the first metrics line after FR's (SI's) start.
+    launch(
+        &hess,
+        N_FORKED,
+        &arm_flags(false, false),
+        true,
+        "HESS to the end",
+    );
+    launch(
+        &fr,
+        N_FORKED,
+        &arm_flags(true, false),
+        true,
+        "FR to the end",
+    );
+    for (what, dir, start) in [("HESS", &hess, fr_start), ("FR only", &fr, si_start)] {
+        assert_eq!(
+            first_difference(&reference, &lines(&dir.join("metrics.jsonl"))),
+            Some(first_line_after(&reference, start)),
+            "{what} should equal the reference exactly until {start} episodes, and no further"
+        );
+    }
+    eprintln!(
+        "forked arms equal the reference ({} metrics lines, {} evaluations, {N_FORKED} \
+         episodes), in {:.1} s",
+        reference.len(),
+        reference_eval.len(),
+        start.elapsed().as_secs_f64()
     );
 }
