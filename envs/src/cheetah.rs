@@ -48,6 +48,9 @@ pub const OBS_DIM: usize = 2 * N_QPOS;
 const ANG_Y_AXIS: usize = 4;
 /// Symmetric action bound (gym `ctrlrange = [-1, 1]`).
 const ACTION_BOUND: f32 = 1.0;
+/// Reward of every step that is not a success (0 on success): the sparse −1 of the reference
+/// code (digest §9.5).
+pub const STEP_PENALTY: f32 = 1.0;
 
 /// A capsule in its body's frame, MuJoCo style: a centre, a rotation about +y and a half-length.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -850,7 +853,7 @@ impl Env for CheetahHurdle {
         self.episode_live = !(terminated || truncated);
         Ok(Step {
             obs: self.last_obs.clone(),
-            reward: if success { 0.0 } else { -1.0 },
+            reward: if success { 0.0 } else { -STEP_PENALTY },
             terminated,
             truncated,
             info: StepInfo {

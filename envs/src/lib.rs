@@ -23,5 +23,8 @@ pub use coverage::Coverage;
 pub use maze::{Cell, Maze, MazeLayout, Rect};
 pub use maze_env::{MazeEnv, MazeTaskParams, Variant};
 pub use point::{PointMass, PointParams};
-pub use registry::{make, make_with, parse_task, task_names, EnvOptions, RobotKind, Task, TaskId};
+pub use registry::{
+    make, make_with, parse_task, sparse_reward, task_names, EnvOptions, RobotKind, SparseReward,
+    Task, TaskId,
+};
 pub use render::{render_maze_png, RenderError};

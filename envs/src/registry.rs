@@ -135,6 +135,49 @@ pub fn make_with(name: &str, options: EnvOptions) -> Result<Box<dyn Env>, EnvErr
     }
 }
 
+/// The reward rule and episode length of a registered task as [`make_with`] builds it: every
+/// step that is not a success pays `step_penalty`; a step of a robot with a torso (the Ant) whose
+/// torso height is outside its healthy range pays `fall_penalty` on top (0 for the point mass and
+/// the cheetah). Bounds on returns (e.g. the high level's `learner.high.clip_target`) derive
+/// from it instead of repeating 500 or −1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SparseReward {
+    /// Reward magnitude of a step that is neither a success nor a fall.
+    pub step_penalty: f32,
+    /// Extra reward magnitude of a fall step.
+    pub fall_penalty: f32,
+    /// Episode length in control steps (the task's own, or `options.max_steps`).
+    pub max_steps: u32,
+}
+
+/// [`SparseReward`] of the task `name` with run-level `options`, without building it;
+/// [`EnvError::UnknownTask`] for an unknown name.
+pub fn sparse_reward(name: &str, options: EnvOptions) -> Result<SparseReward, EnvError> {
+    Ok(match parse_task(name)? {
+        Task::Maze(id) => {
+            let task = MazeTaskParams::default();
+            let fall_penalty = match id.robot {
+                RobotKind::Ant => task.fall_penalty,
+                RobotKind::Point => 0.0,
+            };
+            SparseReward {
+                step_penalty: task.step_penalty,
+                fall_penalty,
+                max_steps: options
+                    .max_steps
+                    .unwrap_or(Maze::new(id.layout).max_steps()),
+            }
+        }
+        Task::HalfCheetahHurdle(_) => SparseReward {
+            step_penalty: crate::cheetah::STEP_PENALTY,
+            fall_penalty: 0.0,
+            max_steps: options
+                .max_steps
+                .unwrap_or(CheetahParams::default().max_steps),
+        },
+    })
+}
+
 /// Robot parameters for maze tasks; only the one matching the task's robot is used.
 #[derive(Debug, Clone, Default)]
 pub struct MazeRobotParams {

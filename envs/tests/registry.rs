@@ -168,3 +168,63 @@ fn an_episode_length_override_truncates_every_task_kind() {
         assert_eq!(truncated, vec![false, false, true], "{name}");
     }
 }
+
+#[test]
+fn the_sparse_reward_of_every_task_matches_what_its_env_pays_and_how_long_it_runs() {
+    for name in task_names() {
+        for max_steps in [None, Some(4)] {
+            let options = EnvOptions { max_steps };
+            let expected = envs::sparse_reward(name, options).unwrap();
+            let mut env = make_with(name, options).unwrap();
+            assert_eq!(env.spec().max_steps, expected.max_steps, "{name}");
+            env.reset(3);
+            let action = vec![0.0; env.spec().action_dim];
+            for _ in 0..3 {
+                let step = env.step(&action).unwrap();
+                let paid = if step.info.success {
+                    0.0
+                } else {
+                    expected.step_penalty
+                } + if step.info.fell {
+                    expected.fall_penalty
+                } else {
+                    0.0
+                };
+                assert_eq!(step.reward, -paid, "{name}");
+            }
+        }
+        let robot = match parse_task(name).unwrap() {
+            Task::Maze(id) => Some(id.robot),
+            Task::HalfCheetahHurdle(_) => None,
+        };
+        let reward = envs::sparse_reward(name, EnvOptions::default()).unwrap();
+        assert_eq!(
+            reward.step_penalty, 1.0,
+            "{name}: every task pays −1 per step"
+        );
+        let fall = if robot == Some(RobotKind::Ant) {
+            10.0
+        } else {
+            0.0
+        };
+        assert_eq!(reward.fall_penalty, fall, "{name}: only the Ant can fall");
+    }
+    let lengths: Vec<u32> = [
+        "antmaze-u",
+        "antmaze-s",
+        "pointmaze-w",
+        "halfcheetah-hurdle",
+    ]
+    .iter()
+    .map(|name| {
+        envs::sparse_reward(name, EnvOptions::default())
+            .unwrap()
+            .max_steps
+    })
+    .collect();
+    assert_eq!(lengths, vec![500, 1000, 1000, 1000]);
+    assert!(matches!(
+        envs::sparse_reward("no-such-task", EnvOptions::default()),
+        Err(EnvError::UnknownTask { .. })
+    ));
+}
