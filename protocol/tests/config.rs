@@ -303,3 +303,24 @@ fn a_route_table_cap_beyond_16_bit_node_ids_is_refused() {
             .expect("in range");
     }
 }
+
+#[test]
+fn the_high_target_clamp_is_off_by_default_written_only_when_on_and_round_trips() {
+    let defaults = Config::default();
+    assert!(!defaults.learner.high.clip_target);
+    let text = defaults.to_resolved_toml().expect("serializable");
+    assert!(
+        !text.contains("clip_target"),
+        "off is not written, so older fingerprints hold:\n{text}"
+    );
+    let on = Config::load(None, &sets(&["learner.high.clip_target=true"])).expect("loads");
+    assert!(on.learner.high.clip_target);
+    let text = on.to_resolved_toml().expect("serializable");
+    assert!(text.contains("clip_target = true"), "{text}");
+    assert_eq!(Config::from_toml_str(&text, "resolved").expect("loads"), on);
+    let errors = invalid(Config::load(
+        None,
+        &sets(&["learner.high.clip_target=\"yes\""]),
+    ));
+    assert!(errors.has_path("learner.high.clip_target"), "{errors}");
+}

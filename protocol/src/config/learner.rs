@@ -51,6 +51,23 @@ pub struct HighLearnerConfig {
     /// Training episodes at the start that use uniform random high actions (when the subgoal
     /// is not chosen by exploration). Default 300. Unit: episodes. Source: code (`start_epoch`).
     pub random_episodes: u64,
+    /// Clamp the critic target `y = R + mask·γ·(min Q' − α log π)` to `[−T · p, 0]`, T the
+    /// episode length in env steps (the task's own or `env.episode_length`), p the task's
+    /// per-step penalty (1 on every registered task; `envs::registry::sparse_reward`), as the
+    /// reference code does for its "sparse" reward (digest §3.1). The Ant's fall penalty (−10
+    /// per fall step) is left out of the bound, as in the reference, and the high level
+    /// bootstraps through truncation, so true values can lie below −T: the clamp is the
+    /// reference's heuristic, not a bound on the return. Default false (ours: the runs in
+    /// progress use the unclamped target; the default awaits a measured comparison). Written
+    /// to the resolved TOML only when true, so configs and checkpoints from before the switch
+    /// keep their fingerprint.
+    #[serde(skip_serializing_if = "is_false")]
+    pub clip_target: bool,
+}
+
+/// `skip_serializing_if` helper: a switch that is off is not written.
+fn is_false(value: &bool) -> bool {
+    !*value
 }
 
 impl Default for HighLearnerConfig {
@@ -66,6 +83,7 @@ impl Default for HighLearnerConfig {
             updates_per_transition: 1.0,
             min_transitions: 128,
             random_episodes: 300,
+            clip_target: false,
         }
     }
 }
