@@ -391,6 +391,7 @@ fn build_level(shape: &LevelShape) -> anyhow::Result<SacLevel> {
         auto_alpha: false,
         target_entropy: -(shape.action as f64),
         critic_action_scale: 1.0,
+        target_clip: None,
     };
     Ok(SacLevel::new(shape.name, nets, params)?)
 }

@@ -80,6 +80,7 @@ fn sac(hidden: &[usize]) -> Result<SacLevel> {
         auto_alpha: false,
         target_entropy: -(ACTION as f64),
         critic_action_scale: 1.0,
+        target_clip: None,
     };
     Ok(SacLevel::new("low", nets, params)?)
 }

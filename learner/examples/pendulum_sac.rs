@@ -58,6 +58,7 @@ const PARAMS: SacParams = SacParams {
     auto_alpha: true,
     target_entropy: -(PENDULUM_ACTION_DIM as f64),
     critic_action_scale: 1.0,
+    target_clip: None,
 };
 
 /// Command line.

@@ -20,7 +20,7 @@ use protocol::Config;
 use crate::adam::Adam;
 use crate::deterministic::{DeterministicLevel, DeterministicNets, DeterministicParams};
 use crate::error::LearnerError;
-use crate::sac::{SacLevel, SacNets, SacParams};
+use crate::sac::{SacLevel, SacNets, SacParams, TargetClip};
 
 /// Offset of the critic init seed from the run seed (ours; any constant ≠ 0 keeps the policy
 /// and critic init streams apart).
@@ -115,7 +115,7 @@ pub fn build_networks(
         high_target,
         prefix::HIGH_CRITIC,
     );
-    let high = SacLevel::new("high", high_nets, high_params(config, spec))?;
+    let high = SacLevel::new("high", high_nets, high_params(config, spec)?)?;
     let low = match (policies.low.clone(), low_critic, low_target) {
         (LowPolicy::Gaussian(policy), LowCritic::Twin(critic), LowCritic::Twin(target)) => {
             let nets = maps.level(
@@ -229,9 +229,9 @@ impl Maps<'_> {
 }
 
 /// `[learner.high]` as SAC parameters; H̄ = −dim(delta).
-fn high_params(config: &Config, spec: &NetsSpec) -> SacParams {
+fn high_params(config: &Config, spec: &NetsSpec) -> Result<SacParams, LearnerError> {
     let c = &config.learner.high;
-    SacParams {
+    Ok(SacParams {
         gamma: c.gamma,
         tau: c.tau,
         lr: c.lr,
@@ -239,7 +239,31 @@ fn high_params(config: &Config, spec: &NetsSpec) -> SacParams {
         auto_alpha: c.auto_alpha,
         target_entropy: -(spec.latent_dim as f64),
         critic_action_scale: 1.0,
+        target_clip: high_target_clip(config)?,
+    })
+}
+
+/// `learner.high.clip_target`: y ∈ [−T · p, 0] with T the episode length in env steps and p
+/// the per-step penalty of `env.task` as the registry builds it (the reference's [−T, 0];
+/// the Ant's fall penalty is left out, as there). `None` when the switch is off; an unknown
+/// task is an error naming the switch.
+pub fn high_target_clip(config: &Config) -> Result<Option<TargetClip>, LearnerError> {
+    if !config.learner.high.clip_target {
+        return Ok(None);
     }
+    let options = envs::EnvOptions {
+        max_steps: config.env.episode_length,
+    };
+    let reward = envs::sparse_reward(&config.env.task, options).map_err(|err| {
+        LearnerError::Unsupported {
+            key: "learner.high.clip_target",
+            reason: format!("the bound −T·(step penalty) needs a registered env.task: {err}"),
+        }
+    })?;
+    Ok(Some(TargetClip {
+        low: -f64::from(reward.max_steps) * f64::from(reward.step_penalty),
+        high: 0.0,
+    }))
 }
 
 /// `[learner.low]` as SAC parameters; H̄ = −dim(action), in the units of the normalised action
@@ -264,6 +288,7 @@ fn low_params(config: &Config, spec: &NetsSpec) -> SacParams {
         auto_alpha: c.auto_alpha,
         target_entropy,
         critic_action_scale,
+        target_clip: None,
     }
 }
 
@@ -302,6 +327,48 @@ mod tests {
         let (dim, bound) = (spec.action_dim as f64, spec.low_action_scale);
         assert_eq!(normalised.critic_action_scale, bound);
         assert!((normalised.target_entropy - (-dim + dim * bound.ln())).abs() < 1e-12);
-        assert_eq!(high_params(&config, &spec).critic_action_scale, 1.0);
+        assert_eq!(
+            high_params(&config, &spec).unwrap().critic_action_scale,
+            1.0
+        );
+    }
+
+    #[test]
+    fn the_high_target_clamp_is_minus_the_episode_length_times_the_step_penalty_up_to_zero() {
+        let mut config = Config::default();
+        assert_eq!(high_target_clip(&config).unwrap(), None, "off by default");
+        config.learner.high.clip_target = true;
+        let low_of = |config: &Config| high_target_clip(config).unwrap().map(|c| (c.low, c.high));
+        for (task, low) in [
+            ("antmaze-u", -500.0),
+            ("antmaze-s", -1000.0),
+            ("ant-fourrooms-test", -1000.0),
+            ("pointmaze-u", -500.0),
+            ("halfcheetah-hurdle", -1000.0),
+        ] {
+            config.env.task = task.to_owned();
+            assert_eq!(low_of(&config), Some((low, 0.0)), "{task}");
+        }
+        config.env.episode_length = Some(60);
+        assert_eq!(
+            low_of(&config),
+            Some((-60.0, 0.0)),
+            "env.episode_length wins"
+        );
+        config.env.task = "no-such-task".to_owned();
+        let err = high_target_clip(&config).unwrap_err().to_string();
+        assert!(
+            err.contains("learner.high.clip_target") && err.contains("no-such-task"),
+            "{err}"
+        );
+        let spec = NetsSpec::default();
+        config.env.task = "antmaze-u".to_owned();
+        let clip = high_params(&config, &spec).unwrap().target_clip;
+        assert_eq!(clip.map(|c| c.low), Some(-60.0), "the high level gets it");
+        assert_eq!(
+            low_params(&config, &spec).target_clip,
+            None,
+            "the low level never"
+        );
     }
 }

@@ -18,6 +18,7 @@ const PARAMS: SacParams = SacParams {
     auto_alpha: false,
     target_entropy: -1.0,
     critic_action_scale: 1.0,
+    target_clip: None,
 };
 
 /// A 1-D state → 1-D action level with hidden [32, 32]; returns the maps too.

@@ -8,7 +8,8 @@
 //!
 //! - Soft target (SAC Eq. 3 with the clipped double-Q of TD3):
 //!   `y = r + γ · (1 − d) · (min(Q'₁, Q'₂)(s', a') − α · log π(a'|s'))`, `a' ~ π(·|s')`,
-//!   built from detached inputs.
+//!   built from detached inputs; optionally clamped to `[low, high]` ([`clip_target`], the
+//!   reference code's clamp of the high level's target to `[−T, 0]` under a sparse reward).
 //! - Critic (SAC Eq. 5 for each twin, summed): `L_Q = mean((Q₁ − y)²) + mean((Q₂ − y)²)`.
 //! - Actor (SAC Eq. 7, reparameterised): `L_π = mean(α · log π(ã|s) − min(Q₁, Q₂)(s, ã))`.
 //! - Temperature (SAC v2 Eq. 18, CleanRL form):
@@ -89,6 +90,25 @@ pub fn soft_target(
         .sub(&next_log_prob.detach().affine(alpha, 0.0)?)?;
     let continuation = terminal.affine(-gamma, gamma)?; // γ(1 − d)
     Ok(reward.add(&continuation.mul(&soft_value)?)?.detach())
+}
+
+/// Bounds on the soft target y (`learner.high.clip_target`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetClip {
+    /// Lower bound (the reference's −T: episode length × per-step penalty).
+    pub low: f64,
+    /// Upper bound (0: no step pays a positive reward).
+    pub high: f64,
+}
+
+/// `clamp(y, low, high)` elementwise where `clip` is set; `y` itself otherwise. `target`:
+/// `[batch, 1]`.
+pub fn clip_target(target: &Tensor, clip: Option<TargetClip>) -> Result<Tensor, LearnerError> {
+    batch_of("clip_target: target", target)?;
+    Ok(match clip {
+        Some(TargetClip { low, high }) => target.clamp(low, high)?.detach(),
+        None => target.clone(),
+    })
 }
 
 /// The twin critic loss `mean((Q₁ − y)²) + mean((Q₂ − y)²)`; `q: [batch, 2]`, `target: [batch, 1]`.

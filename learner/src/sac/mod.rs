@@ -4,5 +4,5 @@
 pub mod losses;
 pub mod update;
 
-pub use losses::{ActorStats, CriticStats};
+pub use losses::{ActorStats, CriticStats, TargetClip};
 pub use update::{SacBatch, SacLevel, SacNets, SacParams, SacStats};

@@ -20,7 +20,8 @@ use nets::{GaussianPolicy, TwinCritic};
 
 use crate::error::LearnerError;
 use crate::sac::losses::{
-    actor_loss, soft_target, temperature_loss, twin_critic_loss, ActorStats, CriticStats,
+    actor_loss, clip_target, soft_target, temperature_loss, twin_critic_loss, ActorStats,
+    CriticStats, TargetClip,
 };
 
 /// Hyper-parameters of one level (from `[learner.high]` / `[learner.low]`).
@@ -40,6 +41,8 @@ pub struct SacParams {
     pub target_entropy: f64,
     /// The critics see `action / critic_action_scale` (1 = the raw action).
     pub critic_action_scale: f64,
+    /// Clamp y to these bounds (`learner.high.clip_target`); `None` leaves it unbounded.
+    pub target_clip: Option<TargetClip>,
 }
 
 /// One minibatch as tensors. Shapes: `head, next_head: [B, h]`, `tail: [B, t]` (shared by s and
@@ -264,7 +267,17 @@ impl SacLevel {
         })
     }
 
-    /// y under no-grad.
+    /// y as the next [`SacLevel::update`] on `batch` with `next_eps` builds it (target critics
+    /// and α as they are now, clamped when `target_clip` is set); `[B, 1]`, detached.
+    pub fn critic_target(
+        &self,
+        batch: &SacBatch,
+        next_eps: &Tensor,
+    ) -> Result<Tensor, LearnerError> {
+        self.target(batch, next_eps, self.temperature.alpha()?)
+    }
+
+    /// y under no-grad, clamped to `target_clip` when set.
     fn target(
         &self,
         batch: &SacBatch,
@@ -279,14 +292,15 @@ impl SacLevel {
             self.params.critic_action_scale,
         )?;
         let next_min_q = self.nets.target.min_q(&next_q_in)?;
-        soft_target(
+        let target = soft_target(
             &batch.reward,
             &batch.terminal,
             &next_min_q,
             &next_log_prob,
             self.params.gamma,
             alpha,
-        )
+        )?;
+        clip_target(&target, self.params.target_clip)
     }
 
     /// One Adam step on L_Q.
