@@ -117,6 +117,11 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             }
         }
         let episodes = serial.learner.ingest_stats().episodes_completed;
+        // The curves are read back from metrics.jsonl: it must hold whole lines (a no-op
+        // when nothing was written since the last flush).
+        if let Err(err) = serial.metrics.flush() {
+            tracing::warn!("flushing metrics.jsonl failed: {err}");
+        }
         serial.picture.tick(episodes, &serial.graph.service);
     }
     serial.finish(stopped)

@@ -71,7 +71,8 @@ impl Band {
 
 /// Reads `metric` against `x_key` from `run_dir/metrics.jsonl`. Points are kept in file order
 /// with x non-decreasing (a point whose x goes back is dropped) and the last value kept for
-/// repeated x; non-finite values are skipped.
+/// repeated x; non-finite values are skipped. A last line without its newline that is not
+/// JSON is one a running writer has not finished: it is skipped, any other bad line is an error.
 pub fn read_series(run_dir: &Path, x_key: &str, metric: &str) -> anyhow::Result<Series> {
     let path = run_dir.join("metrics.jsonl");
     let text =
@@ -80,12 +81,19 @@ pub fn read_series(run_dir: &Path, x_key: &str, metric: &str) -> anyhow::Result<
         x: Vec::new(),
         y: Vec::new(),
     };
+    let n_lines = text.lines().count();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        let value: serde_json::Value = serde_json::from_str(line)
-            .with_context(|| format!("{}: line {} is not JSON", path.display(), i + 1))?;
+        let value: serde_json::Value = match serde_json::from_str(line) {
+            Ok(value) => value,
+            Err(_) if i + 1 == n_lines && !text.ends_with('\n') => break,
+            Err(err) => {
+                return Err(err)
+                    .with_context(|| format!("{}: line {} is not JSON", path.display(), i + 1))
+            }
+        };
         let (Some(x), Some(y)) = (
             value.get(x_key).and_then(|v| v.as_f64()),
             value.get(metric).and_then(|v| v.as_f64()),
@@ -519,6 +527,26 @@ mod tests {
         ] {
             assert_eq!(arm_name(Path::new(dir)), arm, "{dir}");
         }
+    }
+
+    #[test]
+    fn a_last_line_being_written_is_skipped_and_a_bad_line_before_it_is_an_error() {
+        let dir = std::env::temp_dir().join(format!("asi-plot-partial-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("metrics.jsonl");
+        let whole = "{\"x\": 1, \"y\": 0.5}\n{\"x\": 2, \"y\": 0.75}\n";
+        // A writer in the middle of its third line: the two whole lines are read.
+        std::fs::write(&path, format!("{whole}{{\"x\": 3, \"y\"")).unwrap();
+        let read = read_series(&dir, "x", "y").unwrap();
+        assert_eq!((read.x, read.y), (vec![1.0, 2.0], vec![0.5, 0.75]));
+        // The same bad line ended by a newline is a broken file, not a partial write.
+        std::fs::write(&path, format!("{whole}{{\"x\": 3, \"y\"\n")).unwrap();
+        let err = read_series(&dir, "x", "y").unwrap_err();
+        assert!(format!("{err:#}").contains("line 3 is not JSON"), "{err:#}");
+        // And so is a bad line followed by good ones.
+        std::fs::write(&path, format!("{{\"x\"\n{whole}")).unwrap();
+        assert!(read_series(&dir, "x", "y").is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
