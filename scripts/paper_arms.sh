@@ -1,0 +1,115 @@
+#!/usr/bin/env bash
+# The paper's four arms for one seed, forked from shared prefixes (issue #6, claims 1 and 2).
+#
+#   scripts/paper_arms.sh CONFIG SEED EPISODES OUT_DIR
+#
+# Arms (serial mode, deterministic for the seed), each in OUT_DIR/<arm>_s<SEED>:
+#   asi        FR and SI on (the defaults)
+#   asi-no-fr  --set asi.frontier_reaching=false
+#   asi-no-si  --set asi.self_imitation=false
+#   hess       both off
+# FR cannot change anything before asi.fr_start_episode (the actor draws nothing for FR while
+# its probability is 0) and SI nothing before asi.si_start_episode, and a serial run stopped
+# at an episode count resumes bit-exactly, also with other switches (tests/serial_resume.rs,
+# the fork test). So instead of four runs from scratch this runs one trunk to FR_START, copies
+# it into an FR-on and an FR-off branch, runs both to SI_START, and copies each into an SI-on
+# and an SI-off arm: 4N - FR_START - 2*SI_START episodes instead of 4N, the same results.
+# The shared prefixes run with SI on, so the SI buffer holds every episode whichever build runs
+# them (before commit 35c4e55 the learner filled it only with SI on, and an SI arm forked from
+# an SI-off prefix started with a buffer missing the prefix's episodes).
+#
+# Environment: ASI_BIN (default target/release/asi, built if missing), FR_START (200) and
+# SI_START (300) must equal the config's asi.fr_start_episode / asi.si_start_episode, JOBS (2)
+# arms run at once, NICE (19) their priority. Re-running resumes every unfinished stage.
+# Curves: asi plot OUT_DIR/asi_s* OUT_DIR/hess_s* ... (the _sN suffix is the seed tag).
+set -euo pipefail
+
+if [[ $# -ne 4 ]]; then
+    sed -n '2,20p' "$0" >&2
+    exit 2
+fi
+config=$1 seed=$2 episodes=$3 out=$4
+fr_start=${FR_START:-200}
+si_start=${SI_START:-300}
+jobs=${JOBS:-2}
+nice_level=${NICE:-19}
+bin=${ASI_BIN:-target/release/asi}
+
+if (( episodes <= si_start || si_start <= fr_start )); then
+    echo "need FR_START ($fr_start) < SI_START ($si_start) < EPISODES ($episodes)" >&2
+    exit 2
+fi
+if [[ ! -x $bin ]]; then
+    cargo build --release
+fi
+mkdir -p "$out"
+
+# Switches of each arm; the trunk and the FR-off branch run with those of asi-no-fr.
+declare -A flags=(
+    [asi]=""
+    [asi-no-fr]="--set asi.frontier_reaching=false"
+    [asi-no-si]="--set asi.self_imitation=false"
+    [hess]="--set asi.frontier_reaching=false --set asi.self_imitation=false"
+)
+
+# Episodes finished by the run in $1 (0 when it has not started).
+done_episodes() {
+    [[ -d $1/checkpoints/serial ]] || { echo 0; return; }
+    python3 - "$1/metrics.jsonl" <<'EOF'
+import json, sys
+last = 0
+try:
+    for line in open(sys.argv[1]):
+        try:
+            last = json.loads(line).get("learner/schedule/train_episodes", last)
+        except ValueError:
+            pass
+except OSError:
+    pass
+print(int(last))
+EOF
+}
+
+# run DIR ARM UNTIL: trains the run in DIR with ARM's switches to UNTIL episodes (resuming it;
+# nothing to do when it is there already).
+run() {
+    local dir=$1 arm=$2 until=$3
+    if (( $(done_episodes "$dir") >= until )); then
+        echo "$(basename "$dir"): at episode $until already"
+        return
+    fi
+    echo "$(date -u +%T) $(basename "$dir"): to episode $until (${flags[$arm]:-defaults})"
+    # shellcheck disable=SC2086  # the switches are separate words on purpose
+    nice -n "$nice_level" "$bin" train --serial --config "$config" --seed "$seed" \
+        --run-dir "$dir" ${flags[$arm]} --set run.max_episodes="$until" \
+        >>"$dir.log" 2>&1
+    echo "$(date -u +%T) $(basename "$dir"): done"
+}
+
+# fork FROM TO: copies a finished prefix, unless TO exists already (then it is resumed).
+fork() {
+    if [[ ! -e $2 ]]; then
+        cp -a "$1" "$2"
+        cp "$1.log" "$2.log"
+    fi
+}
+
+trunk=$out/trunk_s$seed fr_on=$out/asi_s$seed fr_off=$out/asi-no-fr_s$seed
+run "$trunk" asi-no-fr "$fr_start"
+
+fork "$trunk" "$fr_on"
+fork "$trunk" "$fr_off"
+# Both branches to SI_START.
+run "$fr_on" asi "$si_start" &
+run "$fr_off" asi-no-fr "$si_start" &
+wait
+
+fork "$fr_on" "$out/asi-no-si_s$seed"
+fork "$fr_off" "$out/hess_s$seed"
+# The four arms to EPISODES, JOBS at a time.
+for arm in asi asi-no-fr asi-no-si hess; do
+    while (( $(jobs -rp | wc -l) >= jobs )); do wait -n; done
+    run "$out/${arm}_s$seed" "$arm" "$episodes" &
+done
+wait
+echo "$(date -u +%T) seed $seed: all arms at $episodes episodes in $out"
