@@ -52,6 +52,11 @@ pub struct RunConfig {
     /// The sliding window of [`RunConfig::max_restarts`]. Default 10. Unit: minutes.
     /// Source: ours.
     pub restart_window_mins: f64,
+    /// How long `asi train` waits for the learner and graph-service to report ready before it
+    /// stops the start with an error naming the process that is not (and stops them all).
+    /// Raise it when restoring a large checkpoint takes longer. Default 60. Unit: seconds.
+    /// Source: ours.
+    pub startup_timeout_secs: f64,
 }
 
 impl Default for RunConfig {
@@ -67,6 +72,7 @@ impl Default for RunConfig {
             checkpoint_interval_mins: 30.0,
             max_restarts: 5,
             restart_window_mins: 10.0,
+            startup_timeout_secs: 60.0,
         }
     }
 }
@@ -101,6 +107,7 @@ impl RunConfig {
             self.checkpoint_interval_mins,
         );
         c.positive("run.restart_window_mins", self.restart_window_mins);
+        c.positive("run.startup_timeout_secs", self.startup_timeout_secs);
     }
 }
 
