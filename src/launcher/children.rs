@@ -111,7 +111,8 @@ impl Children {
         &self.restarts_per_family
     }
 
-    fn log_path(&self, kind: ChildKind) -> std::path::PathBuf {
+    /// Where a child's stdout and stderr go: `run_dir/logs/<name>.log`.
+    pub fn log_path(&self, kind: ChildKind) -> std::path::PathBuf {
         self.ctx
             .run_dir
             .join("logs")
@@ -170,7 +171,8 @@ impl Children {
     }
 
     /// While starting: `Some(message)` if the learner or graph-service has exited before it
-    /// was ready (a broken setup; restarting it would only repeat the failure).
+    /// was ready (a broken setup; restarting it would only repeat the failure). The message
+    /// names the process, its exit status, the error it printed last and its log.
     pub fn check_services(&mut self) -> anyhow::Result<Option<String>> {
         for i in 0..self.children.len() {
             let kind = self.children[i].kind;
@@ -179,10 +181,14 @@ impl Children {
             }
             if let Some(process) = &mut self.children[i].process {
                 if let Some(status) = process.try_wait()? {
+                    // Reaped: stopping the rest must not signal a pid that may be reused.
+                    self.children[i].process = None;
+                    let log = self.log_path(kind);
+                    let reason = last_error(&log).map_or(String::new(), |e| format!(": {e}"));
                     return Ok(Some(format!(
-                        "{} exited while starting ({status}); see {}",
+                        "{} exited while starting ({status}){reason}; see {}",
                         kind.name(),
-                        self.log_path(kind).display()
+                        log.display()
                     )));
                 }
             }
@@ -321,6 +327,25 @@ impl Children {
             }
         }
     }
+}
+
+/// The last `error: …` line a process printed to its log (what `main` prints before a
+/// non-zero exit), read from the log's tail; `None` when there is none.
+fn last_error(log: &std::path::Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    /// Enough for the error chain, which is printed last.
+    const TAIL_BYTES: u64 = 16 * 1024;
+    let mut file = File::open(log).ok()?;
+    let len = file.metadata().ok()?.len();
+    file.seek(SeekFrom::Start(len.saturating_sub(TAIL_BYTES)))
+        .ok()?;
+    let mut tail = Vec::new();
+    file.read_to_end(&mut tail).ok()?;
+    String::from_utf8_lossy(&tail)
+        .lines()
+        .rev()
+        .find_map(|line| line.strip_prefix("error: "))
+        .map(str::to_owned)
 }
 
 fn backoff(incarnation: u32) -> Duration {

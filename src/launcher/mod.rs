@@ -6,7 +6,10 @@
 //! Shutdown order matters for "nothing lost": actors stop first (SIGTERM; they finish the chunk
 //! in hand), then the learner and graph-service get a Stop message and drain what the actors
 //! sent before they exit. A signal, failure or timeout while the services are still starting
-//! stops them the same way (Stop, then SIGTERM) before the launcher exits.
+//! stops them the same way (Stop, then SIGTERM) before the launcher exits; after a failure or
+//! a timeout, a service that is not ready gets SIGTERM at once (it may hang, e.g. on a read
+//! that never returns, and holds nothing yet), and the launcher exits non-zero with an error
+//! naming the process, the reason and its log.
 
 mod children;
 mod metrics;
@@ -35,8 +38,6 @@ const SERVICE_STOP_WAIT: Duration = Duration::from_secs(120);
 /// While the services drain after Stop: how often the Stop is handed to control ports opened
 /// after it was sent.
 const STOP_RECONNECT: Duration = Duration::from_millis(200);
-/// How long service processes may take to open their channels.
-const STARTUP_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// How the wait for the services' readiness ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -66,6 +67,10 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     children.spawn(ChildKind::Learner)?;
     let started = wait_until_ready(&ctx, &node, &mut children);
     if !matches!(started, Ok(Startup::Ready)) {
+        if started.is_err() {
+            // A service not ready by now may never read a Stop (a hung restore): SIGTERM.
+            children.stop_kind(|k| !k.stops_first() && !ctx.is_ready(&k.name()));
+        }
         // Not left to notice on their own that the launcher is gone: stopped in order, and
         // their iceoryx2 resources cleaned.
         shutdown(&control, &mut children);
@@ -105,28 +110,44 @@ fn clean_stale_resources(node: &Node<protocol::transport::Ipc>) {
 }
 
 /// Waits until learner and graph-service report ready, or a signal arrives; `Err` when one of
-/// them exits first or [`STARTUP_TIMEOUT`] passes.
+/// them exits first or `run.startup_timeout_secs` passes (naming the processes not ready).
 fn wait_until_ready(
     ctx: &RunContext,
     node: &Node<protocol::transport::Ipc>,
     children: &mut Children,
 ) -> anyhow::Result<Startup> {
+    // Validated finite and > 0; a timeout too long for a Duration is as good as none.
+    let timeout =
+        Duration::try_from_secs_f64(ctx.config.run.startup_timeout_secs).unwrap_or(Duration::MAX);
+    let services = [ChildKind::Learner, ChildKind::GraphService];
     let start = Instant::now();
-    while !(ctx.is_ready("learner") && ctx.is_ready("graph-service")) {
+    loop {
+        let waiting: Vec<ChildKind> = services
+            .into_iter()
+            .filter(|k| !ctx.is_ready(&k.name()))
+            .collect();
+        if waiting.is_empty() {
+            return Ok(Startup::Ready);
+        }
         if node.wait(TICK).is_err() {
             return Ok(Startup::Signal);
         }
         if let Some(failure) = children.check_services()? {
             bail!(failure);
         }
-        if start.elapsed() > STARTUP_TIMEOUT {
+        if start.elapsed() > timeout {
+            let names: Vec<String> = waiting.iter().map(|k| k.name()).collect();
+            let logs: Vec<String> = waiting
+                .iter()
+                .map(|&k| children.log_path(k).display().to_string())
+                .collect();
             bail!(
-                "learner or graph-service not ready after {STARTUP_TIMEOUT:?}; see {}/logs/",
-                ctx.run_dir.display()
+                "{} not ready after {timeout:?} (run.startup_timeout_secs); see {}",
+                names.join(" and "),
+                logs.join(", ")
             );
         }
     }
-    Ok(Startup::Ready)
 }
 
 fn supervise(

@@ -26,11 +26,15 @@ impl Run {
     /// Starts `asi train --config <config> --run-dir <fresh> --set run.name=<unique>` plus
     /// `extra`; the launcher's stdout and stderr go to `<dir>.launcher.log` beside the folder.
     pub fn start(test: &str, config: &str, extra: &[&str]) -> Run {
+        Run::start_in(fresh_dir(test), config, extra)
+    }
+
+    /// [`Run::start`] in `dir` (e.g. a [`fresh_dir`] holding an earlier run's checkpoints).
+    pub fn start_in(dir: PathBuf, config: &str, extra: &[&str]) -> Run {
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .unwrap()
             .as_nanos();
-        let dir = std::env::temp_dir().join(format!("asi-{test}-{}-{nanos}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let name = format!("run.name=f{}", nanos % 1_000_000_000);
         let dir_arg = dir.to_string_lossy().into_owned();
@@ -169,6 +173,15 @@ impl Drop for Run {
         let _ = std::fs::remove_dir_all(&self.dir);
         let _ = std::fs::remove_file(launcher_log(&self.dir));
     }
+}
+
+/// A unique run folder path for `test` under the temp folder (not created).
+pub fn fresh_dir(test: &str) -> PathBuf {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    std::env::temp_dir().join(format!("asi-{test}-{}-{nanos}", std::process::id()))
 }
 
 fn launcher_log(dir: &Path) -> PathBuf {
