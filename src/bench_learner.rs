@@ -49,9 +49,8 @@ use anyhow::{bail, ensure, Context};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Optimizer, VarMap};
 use learner::phi::{phi_objective, phi_optimizer};
-use learner::sac::{SacBatch, SacLevel, SacNets, SacParams};
-use nets::weights::vars_under;
-use nets::{seeded_var_builder, Encoder, GaussianPolicy, LinearInit, TwinCritic};
+use learner::sac::{SacBatch, SacLevel, SacNets, SacParams, SacShape};
+use nets::{seeded_var_builder, Encoder, LinearInit};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -360,39 +359,16 @@ fn random_batch(
 
 /// A SAC level of `shape` (α fixed 0.2, lr 3e-4, γ 0.99, τ 0.005: SPEC §6.2).
 fn build_level(shape: &LevelShape) -> anyhow::Result<SacLevel> {
-    let device = Device::Cpu;
-    let (vm, tvm) = (VarMap::new(), VarMap::new());
-    let vb = seeded_var_builder(&vm, 0, &device);
-    let init = LinearInit::XavierUniform;
-    let policy = GaussianPolicy::new(
-        &vb.pp("policy"),
-        shape.policy_in(),
-        &shape.hidden,
-        shape.action,
-        shape.scale(),
-        init,
-    )?;
-    let critic = TwinCritic::new(&vb.pp("critic"), shape.critic_in(), &shape.hidden, init)?;
-    let tvb = seeded_var_builder(&tvm, 1, &device);
-    let target = TwinCritic::new(&tvb.pp("critic"), shape.critic_in(), &shape.hidden, init)?;
-    let nets = SacNets {
-        policy,
-        policy_vars: vars_under(&vm, "policy"),
-        critic,
-        critic_vars: vars_under(&vm, "critic"),
-        target,
-        target_vars: vars_under(&tvm, "critic"),
+    let sac_shape = SacShape {
+        policy_in: shape.policy_in(),
+        critic_in: shape.critic_in(),
+        hidden: &shape.hidden,
+        action_dim: shape.action,
+        action_scale: shape.scale(),
+        init: LinearInit::XavierUniform,
     };
-    let params = SacParams {
-        gamma: 0.99,
-        tau: 0.005,
-        lr: 3e-4,
-        alpha: 0.2,
-        auto_alpha: false,
-        target_entropy: -(shape.action as f64),
-        critic_action_scale: 1.0,
-        target_clip: None,
-    };
+    let (nets, _, _) = SacNets::seeded(&sac_shape, 0)?;
+    let params = SacParams::spec_defaults(shape.action);
     Ok(SacLevel::new(shape.name, nets, params)?)
 }
 

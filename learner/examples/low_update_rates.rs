@@ -11,11 +11,9 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
 use learner::deterministic::{DeterministicLevel, DeterministicNets, DeterministicParams};
-use learner::sac::{SacBatch, SacLevel, SacNets, SacParams};
+use learner::sac::{SacBatch, SacLevel, SacNets, SacParams, SacShape};
 use nets::weights::vars_under;
-use nets::{
-    seeded_var_builder, DeterministicActor, DistanceCritic, GaussianPolicy, LinearInit, TwinCritic,
-};
+use nets::{seeded_var_builder, DeterministicActor, DistanceCritic, LinearInit};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
@@ -56,32 +54,16 @@ fn batch(rng: &mut Pcg64Mcg) -> Result<SacBatch> {
 }
 
 fn sac(hidden: &[usize]) -> Result<SacLevel> {
-    let (vm, tvm) = (VarMap::new(), VarMap::new());
-    let vb = seeded_var_builder(&vm, 0, &Device::Cpu);
-    let init = LinearInit::XavierUniform;
-    let (p_in, c_in) = (HEAD + SUBGOAL, HEAD + ACTION + SUBGOAL);
-    let policy = GaussianPolicy::new(&vb.pp("policy"), p_in, hidden, ACTION, SCALE, init)?;
-    let critic = TwinCritic::new(&vb.pp("critic"), c_in, hidden, init)?;
-    let tvb = seeded_var_builder(&tvm, 1, &Device::Cpu);
-    let target = TwinCritic::new(&tvb.pp("critic"), c_in, hidden, init)?;
-    let nets = SacNets {
-        policy,
-        policy_vars: vars_under(&vm, "policy"),
-        critic,
-        critic_vars: vars_under(&vm, "critic"),
-        target,
-        target_vars: vars_under(&tvm, "critic"),
+    let shape = SacShape {
+        policy_in: HEAD + SUBGOAL,
+        critic_in: HEAD + ACTION + SUBGOAL,
+        hidden,
+        action_dim: ACTION,
+        action_scale: SCALE,
+        init: LinearInit::XavierUniform,
     };
-    let params = SacParams {
-        gamma: 0.99,
-        tau: 0.005,
-        lr: 3e-4,
-        alpha: 0.2,
-        auto_alpha: false,
-        target_entropy: -(ACTION as f64),
-        critic_action_scale: 1.0,
-        target_clip: None,
-    };
+    let (nets, _, _) = SacNets::seeded(&shape, 0)?;
+    let params = SacParams::spec_defaults(ACTION);
     Ok(SacLevel::new("low", nets, params)?)
 }
 

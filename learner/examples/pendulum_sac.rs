@@ -23,11 +23,9 @@ use std::fmt::Write as _;
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
-use candle_nn::VarMap;
 use envs::pendulum::{Pendulum, PendulumParams, PENDULUM_ACTION_DIM, PENDULUM_OBS_DIM};
-use learner::sac::{SacBatch, SacLevel, SacNets, SacParams};
-use nets::weights::vars_under;
-use nets::{seeded_var_builder, GaussianPolicy, LinearInit, TwinCritic};
+use learner::sac::{SacBatch, SacLevel, SacNets, SacParams, SacShape};
+use nets::LinearInit;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
@@ -138,24 +136,15 @@ impl Replay {
 
 /// Policy, twin critic and target on two maps, seeded from `seed`.
 fn build_level(seed: u64) -> AnyResult<SacLevel> {
-    let device = Device::Cpu;
-    let (vm, tvm) = (VarMap::new(), VarMap::new());
-    let vb = seeded_var_builder(&vm, seed, &device);
-    let init = LinearInit::XavierUniform;
-    let max_torque = PendulumParams::default().max_torque;
-    let (obs, act) = (PENDULUM_OBS_DIM, PENDULUM_ACTION_DIM);
-    let policy = GaussianPolicy::new(&vb.pp("policy"), obs, &HIDDEN, act, max_torque, init)?;
-    let critic = TwinCritic::new(&vb.pp("critic"), obs + act, &HIDDEN, init)?;
-    let tvb = seeded_var_builder(&tvm, seed.wrapping_add(1), &device);
-    let target = TwinCritic::new(&tvb.pp("critic"), obs + act, &HIDDEN, init)?;
-    let nets = SacNets {
-        policy,
-        policy_vars: vars_under(&vm, "policy"),
-        critic,
-        critic_vars: vars_under(&vm, "critic"),
-        target,
-        target_vars: vars_under(&tvm, "critic"),
+    let shape = SacShape {
+        policy_in: PENDULUM_OBS_DIM,
+        critic_in: PENDULUM_OBS_DIM + PENDULUM_ACTION_DIM,
+        hidden: &HIDDEN,
+        action_dim: PENDULUM_ACTION_DIM,
+        action_scale: PendulumParams::default().max_torque,
+        init: LinearInit::XavierUniform,
     };
+    let (nets, _, _) = SacNets::seeded(&shape, seed)?;
     Ok(SacLevel::new("pendulum", nets, PARAMS)?)
 }
 

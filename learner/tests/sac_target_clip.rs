@@ -8,10 +8,8 @@
 //! `y = r + γ · (1 − d) · Q_CONST`.
 
 use candle_core::{Device, Tensor};
-use candle_nn::VarMap;
-use learner::sac::{SacBatch, SacLevel, SacNets, SacParams, TargetClip};
-use nets::weights::vars_under;
-use nets::{seeded_var_builder, GaussianPolicy, LinearInit, TwinCritic};
+use learner::sac::{SacBatch, SacLevel, SacNets, SacParams, SacShape, TargetClip};
+use nets::LinearInit;
 
 /// The output of both critics (online and target) for every input.
 const Q_CONST: f32 = -600.0;
@@ -46,13 +44,16 @@ const CLAMPED: [f32; 6] = [0.0, 0.0, -20.0, -500.0, -294.0, -500.0];
 
 /// A 1-D state → 1-D action level (a high level: no tail) whose critics output `Q_CONST`.
 fn level(target_clip: Option<TargetClip>) -> SacLevel {
-    let cpu = Device::Cpu;
-    let vm = VarMap::new();
-    let vb = seeded_var_builder(&vm, 1, &cpu);
-    let policy =
-        GaussianPolicy::new(&vb.pp("policy"), 1, &[8], 1, 1.0, LinearInit::XavierUniform).unwrap();
-    let critic = TwinCritic::new(&vb.pp("critic"), 2, &[8], LinearInit::XavierUniform).unwrap();
-    for var in vars_under(&vm, "critic") {
+    let shape = SacShape {
+        policy_in: 1,
+        critic_in: 2,
+        hidden: &[8],
+        action_dim: 1,
+        action_scale: 1.0,
+        init: LinearInit::XavierUniform,
+    };
+    let (nets, _, _) = SacNets::seeded(&shape, 1).unwrap();
+    for var in &nets.critic_vars {
         let value = if var.dims().len() == 1 { Q_CONST } else { 0.0 };
         var.set(
             &var.as_tensor()
@@ -63,22 +64,6 @@ fn level(target_clip: Option<TargetClip>) -> SacLevel {
         )
         .unwrap();
     }
-    let tvm = VarMap::new();
-    let target = TwinCritic::new(
-        &seeded_var_builder(&tvm, 2, &cpu).pp("critic"),
-        2,
-        &[8],
-        LinearInit::XavierUniform,
-    )
-    .unwrap();
-    let nets = SacNets {
-        policy,
-        policy_vars: vars_under(&vm, "policy"),
-        critic,
-        critic_vars: vars_under(&vm, "critic"),
-        target,
-        target_vars: vars_under(&tvm, "critic"),
-    };
     let params = SacParams {
         target_clip,
         ..PARAMS

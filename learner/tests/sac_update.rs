@@ -3,9 +3,9 @@
 
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
-use learner::sac::{SacBatch, SacLevel, SacNets, SacParams};
+use learner::sac::{SacBatch, SacLevel, SacNets, SacParams, SacShape};
 use nets::weights::vars_under;
-use nets::{seeded_var_builder, GaussianPolicy, LinearInit, TwinCritic};
+use nets::LinearInit;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
@@ -23,36 +23,15 @@ const PARAMS: SacParams = SacParams {
 
 /// A 1-D state → 1-D action level with hidden [32, 32]; returns the maps too.
 fn level(params: SacParams) -> (SacLevel, VarMap, VarMap) {
-    let cpu = Device::Cpu;
-    let vm = VarMap::new();
-    let vb = seeded_var_builder(&vm, 1, &cpu);
-    let policy = GaussianPolicy::new(
-        &vb.pp("policy"),
-        1,
-        &[32, 32],
-        1,
-        1.0,
-        LinearInit::XavierUniform,
-    )
-    .unwrap();
-    let critic =
-        TwinCritic::new(&vb.pp("critic"), 2, &[32, 32], LinearInit::XavierUniform).unwrap();
-    let tvm = VarMap::new();
-    let target = TwinCritic::new(
-        &seeded_var_builder(&tvm, 2, &cpu).pp("critic"),
-        2,
-        &[32, 32],
-        LinearInit::XavierUniform,
-    )
-    .unwrap();
-    let nets = SacNets {
-        policy,
-        policy_vars: vars_under(&vm, "policy"),
-        critic,
-        critic_vars: vars_under(&vm, "critic"),
-        target,
-        target_vars: vars_under(&tvm, "critic"),
+    let shape = SacShape {
+        policy_in: 1,
+        critic_in: 2,
+        hidden: &[32, 32],
+        action_dim: 1,
+        action_scale: 1.0,
+        init: LinearInit::XavierUniform,
     };
+    let (nets, vm, tvm) = SacNets::seeded(&shape, 1).unwrap();
     (SacLevel::new("test", nets, params).unwrap(), vm, tvm)
 }
 

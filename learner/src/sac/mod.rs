@@ -1,8 +1,11 @@
 //! Soft actor-critic for both levels (SPEC §6.2): [`losses`] holds the math as pure functions,
-//! [`update`] one gradient update of one level (networks, optimisers, temperature, Polyak).
+//! [`networks`] the networks of one level, [`update`] one gradient update of one level
+//! (optimisers, temperature, Polyak).
 
 pub mod losses;
+pub mod networks;
 pub mod update;
 
 pub use losses::{ActorStats, CriticStats, TargetClip};
-pub use update::{SacBatch, SacLevel, SacNets, SacParams, SacStats};
+pub use networks::{SacNets, SacShape};
+pub use update::{SacBatch, SacLevel, SacParams, SacStats};

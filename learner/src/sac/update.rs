@@ -23,6 +23,7 @@ use crate::sac::losses::{
     actor_loss, clip_target, soft_target, temperature_loss, twin_critic_loss, ActorStats,
     CriticStats, TargetClip,
 };
+use crate::sac::networks::SacNets;
 
 /// Hyper-parameters of one level (from `[learner.high]` / `[learner.low]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -43,6 +44,24 @@ pub struct SacParams {
     pub critic_action_scale: f64,
     /// Clamp y to these bounds (`learner.high.clip_target`); `None` leaves it unbounded.
     pub target_clip: Option<TargetClip>,
+}
+
+impl SacParams {
+    /// SPEC §6.2 for an action of `action_dim`: γ 0.99, τ 0.005, lr 3e-4, α 0.2 fixed,
+    /// H̄ = −`action_dim`, critics on the raw action, y unbounded. The learner itself reads
+    /// these from the config; this is for a level built on its own (benchmarks, examples).
+    pub fn spec_defaults(action_dim: usize) -> Self {
+        Self {
+            gamma: 0.99,
+            tau: 0.005,
+            lr: 3e-4,
+            alpha: 0.2,
+            auto_alpha: false,
+            target_entropy: -(action_dim as f64),
+            critic_action_scale: 1.0,
+            target_clip: None,
+        }
+    }
 }
 
 /// One minibatch as tensors. Shapes: `head, next_head: [B, h]`, `tail: [B, t]` (shared by s and
@@ -161,23 +180,6 @@ impl Temperature {
 /// Adam with PyTorch's defaults at learning rate `lr`.
 fn adam(vars: Vec<Var>, lr: f64) -> Result<Adam, LearnerError> {
     Ok(Adam::new(vars, AdamParams::with_lr(lr))?)
-}
-
-/// The networks of one level handed to [`SacLevel::new`].
-#[derive(Debug)]
-pub struct SacNets {
-    /// The policy (shares its parameters with the published set).
-    pub policy: GaussianPolicy,
-    /// Its parameters.
-    pub policy_vars: Vec<Var>,
-    /// Online twin critic.
-    pub critic: TwinCritic,
-    /// Its parameters, sorted by name.
-    pub critic_vars: Vec<Var>,
-    /// Target twin critic (same shape).
-    pub target: TwinCritic,
-    /// Its parameters, sorted by name (same order as `critic_vars`).
-    pub target_vars: Vec<Var>,
 }
 
 /// SAC state of one level: networks, optimisers, temperature.
