@@ -7,32 +7,13 @@
 
 mod common;
 
-use candle_core::{DType, Device, Tensor, Var};
-use candle_nn::{VarBuilder, VarMap};
+use candle_core::{Device, Tensor, Var};
+use candle_nn::VarMap;
 use common::*;
 use learner::phi::{PhiParams, PhiStore, PhiTrainer, RunKind};
 use learner::Learner;
-use nets::{prefix, seeded_var_builder, spec_from_config, Encoder, PolicySet};
-use protocol::{PhiVersion, TrajectoryFlags};
-
-/// Rounds after 4 and 8 episodes, 300 steps each, batch 16, lr 0.01, k = c = 2.
-fn config() -> protocol::Config {
-    let mut c = common::config();
-    c.encoder.first_round_episode = 4;
-    c.encoder.interval_episodes = 4;
-    c.encoder.steps_per_round = 300;
-    c.encoder.batch_size = 16;
-    c.encoder.lr = 0.01;
-    c.validate().unwrap();
-    c
-}
-
-/// The overflowing state at time `t`: all components ±3e38, the sign alternating with `t` so
-/// that neighbours are far apart.
-fn huge_state(t: usize) -> [f32; 3] {
-    let sign = if t.is_multiple_of(2) { 1.0 } else { -1.0 };
-    [sign * 3.0e38; 3]
-}
+use nets::{seeded_var_builder, spec_from_config, PolicySet};
+use protocol::PhiVersion;
 
 /// A run of 11 states: huge ones, or a point moving on a line (`[0.1 t, 0.1 run, 0.5]`).
 fn run_obs(run: usize, huge: bool) -> Vec<f32> {
@@ -50,7 +31,7 @@ fn run_obs(run: usize, huge: bool) -> Vec<f32> {
 /// A trainer on a fresh policy set, and the set's encoder variables (name-sorted copies of
 /// their values are what the tests compare).
 fn trainer(steps_per_round: u64, batch_size: usize) -> (PhiTrainer, VarMap) {
-    let mut c = config();
+    let mut c = phi_config();
     c.encoder.steps_per_round = steps_per_round;
     c.encoder.batch_size = batch_size;
     let spec = spec_from_config(&c, DIMS).unwrap();
@@ -178,47 +159,18 @@ fn a_round_with_some_non_finite_steps_trains_on_the_others_only() {
     assert!(good_written > 0);
 }
 
-/// The learner's current φ.
-fn phi_of(l: &Learner) -> Encoder {
-    let vb = VarBuilder::from_varmap(l.policy_varmap(), DType::F32, &Device::Cpu);
-    let spec = l.nets_spec();
-    Encoder::new(
-        &vb.pp(prefix::ENCODER),
-        spec.obs_dim,
-        &spec.encoder_hidden,
-        spec.latent_dim,
-    )
-    .unwrap()
-}
-
-fn metric(l: &Learner, name: &str) -> f64 {
-    l.metrics()
-        .into_iter()
-        .find(|(n, _)| *n == name)
-        .unwrap_or_else(|| panic!("{name} missing"))
-        .1
-}
-
 #[test]
 fn a_learner_fed_overflowing_states_ends_the_phi_round_without_a_new_version_and_goes_on() {
-    let mut l = Learner::new(&config(), DIMS, 7).unwrap();
+    let mut l = Learner::new(&phi_config(), DIMS, 7).unwrap();
     let probe = Tensor::from_vec(vec![0.3f32, -0.2, 0.5], (1, 3), &Device::Cpu).unwrap();
-    let phi_before = phi_of(&l)
+    let phi_before = encoder_of(&l)
         .forward(&probe)
         .unwrap()
         .to_vec2::<f32>()
         .unwrap();
     l.publish_due().unwrap().unwrap();
-    for ep in 0..4u64 {
-        let mut records = steps(0..10, ep, 2, 9);
-        for (t, r) in records.iter_mut().enumerate() {
-            r.obs = huge_state(t).to_vec();
-            r.next_obs = huge_state(t + 1).to_vec();
-        }
-        let flags = TrajectoryFlags::EPISODE_START
-            | TrajectoryFlags::EPISODE_END
-            | TrajectoryFlags::TRUNCATED;
-        ingest(&mut l, 0, ep, 0, &records, flags).unwrap();
+    for ep in 0..4 {
+        ingest_episode_in_one_chunk(&mut l, ep, true);
     }
     let mut phi_steps = 0;
     loop {
@@ -234,7 +186,7 @@ fn a_learner_fed_overflowing_states_ends_the_phi_round_without_a_new_version_and
     assert_eq!(metric(&l, "phi/nonfinite_rounds"), 1.0);
     assert_eq!(metric(&l, "phi/rounds"), 0.0);
     assert_eq!(l.progress().phi_version, PhiVersion(0));
-    let phi_after = phi_of(&l)
+    let phi_after = encoder_of(&l)
         .forward(&probe)
         .unwrap()
         .to_vec2::<f32>()

@@ -4,42 +4,17 @@
 
 mod common;
 
-use candle_core::{DType, Device, Tensor};
-use candle_nn::{VarBuilder, VarMap};
+use candle_core::{Device, Tensor};
+use candle_nn::VarMap;
 use common::*;
 use learner::phi::triplet_loss;
 use learner::{Learner, PHI_STEPS_PER_CALL};
-use nets::{load_safetensors_bytes, prefix, seeded_var_builder, Encoder, PolicySet};
+use nets::{load_safetensors_bytes, seeded_var_builder, Encoder, PolicySet};
 use protocol::{PhiVersion, TrajectoryFlags};
 
-/// Rounds after 4 and 8 episodes, 300 steps each (several slices), batch 16, lr 0.01,
-/// k = c = 2.
-fn config() -> protocol::Config {
-    let mut c = common::config();
-    c.encoder.first_round_episode = 4;
-    c.encoder.interval_episodes = 4;
-    c.encoder.steps_per_round = 300;
-    c.encoder.batch_size = 16;
-    c.encoder.lr = 0.01;
-    c.validate().unwrap();
-    c
-}
-
+/// A learner on [`phi_config`]: rounds of 300 steps, run in several slices.
 fn learner() -> Learner {
-    Learner::new(&config(), DIMS, 7).unwrap()
-}
-
-/// The learner's current φ (sharing its parameters).
-fn phi_of(l: &Learner) -> Encoder {
-    let vb = VarBuilder::from_varmap(l.policy_varmap(), DType::F32, &Device::Cpu);
-    let spec = l.nets_spec();
-    Encoder::new(
-        &vb.pp(prefix::ENCODER),
-        spec.obs_dim,
-        &spec.encoder_hidden,
-        spec.latent_dim,
-    )
-    .unwrap()
+    Learner::new(&phi_config(), DIMS, 7).unwrap()
 }
 
 /// Mean triplet loss (margin 1, k = 2) over every triplet of the synthetic episodes
@@ -60,14 +35,6 @@ fn line_loss(phi: &Encoder, n_episodes: u64) -> f64 {
     stats.loss
 }
 
-fn metric(l: &Learner, name: &str) -> f64 {
-    l.metrics()
-        .into_iter()
-        .find(|(n, _)| *n == name)
-        .unwrap_or_else(|| panic!("{name} missing"))
-        .1
-}
-
 #[test]
 fn a_round_lowers_the_triplet_loss_and_publishes_a_new_phi_with_the_same_layout() {
     let mut l = learner();
@@ -81,7 +48,7 @@ fn a_round_lowers_the_triplet_loss_and_publishes_a_new_phi_with_the_same_layout(
         44,
         "11 states per 10-step episode"
     );
-    let before = line_loss(&phi_of(&l), 4);
+    let before = line_loss(&encoder_of(&l), 4);
     let mut phi_steps = 0;
     while l.progress().phi_version == PhiVersion(0) {
         let ran = l.train(usize::MAX).unwrap();
@@ -89,7 +56,7 @@ fn a_round_lowers_the_triplet_loss_and_publishes_a_new_phi_with_the_same_layout(
         phi_steps += ran;
     }
     assert_eq!(phi_steps, 300);
-    let after = line_loss(&phi_of(&l), 4);
+    let after = line_loss(&encoder_of(&l), 4);
     assert!(
         after < 0.5 * before,
         "triplet loss {before} → {after}: φ should spread s_t+2 beyond s_t+1"
@@ -219,7 +186,7 @@ fn the_same_seed_gives_the_same_phi() {
             ingest_episode(&mut l, 0, ep, 10, 2, 5);
         }
         while l.train(usize::MAX).unwrap() > 0 {}
-        line_loss(&phi_of(&l), 4)
+        line_loss(&encoder_of(&l), 4)
     };
     assert_eq!(run(), run());
 }

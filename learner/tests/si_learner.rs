@@ -7,73 +7,23 @@ mod common;
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
+use common::*;
 use learner::si::{SiStats, SI_PHI_MISMATCH_ATTEMPTS};
-use learner::{Learner, NoRouteSource, RouteSource, RoutesReply};
+use learner::{Learner, NoRouteSource};
 use nets::{spec_from_config, PolicySet};
-use protocol::graph::{LatentPoint, RouteAnswer, RouteQuery};
-use protocol::{Config, PhiVersion};
+use protocol::graph::LatentPoint;
+use protocol::Config;
 
-/// Answers every query with a straight route of `nodes` points from start to end (`Direct`),
-/// or reports a φ mismatch; records what it was asked.
-struct StraightRoutes {
-    nodes: usize,
-    mismatch: bool,
-    asked: Vec<(Vec<RouteQuery>, PhiVersion)>,
-}
-
-impl StraightRoutes {
-    fn new(nodes: usize) -> Self {
-        Self {
-            nodes,
-            mismatch: false,
-            asked: Vec::new(),
-        }
-    }
-}
-
-impl RouteSource for StraightRoutes {
-    fn routes(&mut self, queries: &[RouteQuery], phi_version: PhiVersion) -> RoutesReply {
-        self.asked.push((queries.to_vec(), phi_version));
-        if self.mismatch {
-            return RoutesReply::PhiMismatch {
-                graph: PhiVersion(phi_version.0 + 1),
-            };
-        }
-        let line = |q: &RouteQuery| -> Vec<LatentPoint> {
-            (0..self.nodes)
-                .map(|i| {
-                    let f = i as f32 / (self.nodes - 1).max(1) as f32;
-                    [
-                        q.start[0] + f * (q.end[0] - q.start[0]),
-                        q.start[1] + f * (q.end[1] - q.start[1]),
-                    ]
-                })
-                .collect()
-        };
-        RoutesReply::Answered(
-            queries
-                .iter()
-                .map(|q| RouteAnswer::Direct(line(q)))
-                .collect(),
-        )
-    }
-}
-
+/// SI on or off, with room for every entry of the tests (1000).
 fn config(self_imitation: bool) -> Config {
-    let mut c = common::config();
-    c.asi.self_imitation = self_imitation;
-    c.asi.si_start_episode = 2;
-    c.asi.si_batch_size = 8;
-    c.asi.si_buffer_capacity = 1000;
-    c.validate().unwrap();
-    c
+    si_config(self_imitation, 1000)
 }
 
 /// A learner that has ingested `episodes` episodes of 10 steps (obs [t, ep, 0.5], goal [5, 6]).
 fn learner_after(config: &Config, episodes: u64) -> Learner {
-    let mut l = Learner::new(config, common::DIMS, 11).unwrap();
+    let mut l = Learner::new(config, DIMS, 11).unwrap();
     for ep in 0..episodes {
-        common::ingest_episode(&mut l, 0, ep, 10, 2, 5);
+        ingest_episode(&mut l, 0, ep, 10, 2, 5);
     }
     l
 }
@@ -82,29 +32,8 @@ fn stats(l: &Learner) -> SiStats {
     *l.self_imitation().stats()
 }
 
-fn policy_bytes(l: &Learner, prefix: &str) -> Vec<f32> {
-    let data = l.policy_varmap().data().lock().unwrap();
-    let mut names: Vec<_> = data
-        .keys()
-        .filter(|k| k.starts_with(prefix))
-        .cloned()
-        .collect();
-    names.sort();
-    names
-        .iter()
-        .flat_map(|n| {
-            data[n]
-                .as_tensor()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f32>()
-                .unwrap()
-        })
-        .collect()
-}
-
 fn phi_of(l: &Learner, config: &Config, obs: [f32; 3]) -> LatentPoint {
-    let spec = spec_from_config(config, common::DIMS).unwrap();
+    let spec = spec_from_config(config, DIMS).unwrap();
     let vb = VarBuilder::from_varmap(l.policy_varmap(), DType::F32, &Device::Cpu);
     let set = PolicySet::new(&spec, &vb).unwrap();
     let x = Tensor::from_slice(&obs, (1, 3), &Device::Cpu).unwrap();
@@ -135,9 +64,9 @@ fn rounds_fall_due_after_the_start_episode_and_train_both_policies_once_each() {
     );
     assert_eq!(l.si_pending(), 2);
     let (high0, low0, enc0) = (
-        policy_bytes(&l, "high_policy"),
-        policy_bytes(&l, "low_policy"),
-        policy_bytes(&l, "encoder"),
+        policy_values(&l, "high_policy"),
+        policy_values(&l, "low_policy"),
+        policy_values(&l, "encoder"),
     );
     let mut routes = StraightRoutes::new(6);
     assert_eq!(
@@ -146,12 +75,16 @@ fn rounds_fall_due_after_the_start_episode_and_train_both_policies_once_each() {
         "a high and a low step"
     );
     assert_ne!(
-        policy_bytes(&l, "high_policy"),
+        policy_values(&l, "high_policy"),
         high0,
         "the high policy moved"
     );
-    assert_ne!(policy_bytes(&l, "low_policy"), low0, "the low policy moved");
-    assert_eq!(policy_bytes(&l, "encoder"), enc0, "φ is not trained by SI");
+    assert_ne!(
+        policy_values(&l, "low_policy"),
+        low0,
+        "the low policy moved"
+    );
+    assert_eq!(policy_values(&l, "encoder"), enc0, "φ is not trained by SI");
     assert_eq!(l.train_self_imitation(&mut routes).unwrap(), 2);
     assert_eq!(
         l.train_self_imitation(&mut routes).unwrap(),

@@ -18,43 +18,12 @@ use learner::learner::checkpoint::{checksum, Manifest, MANIFEST};
 use learner::si::SiStats;
 use learner::{Learner, RouteSource, RoutesReply};
 use protocol::graph::{LatentPoint, RouteAnswer, RouteQuery};
-use protocol::{Config, PhiVersion, TrajectoryFlags};
+use protocol::{Config, PhiVersion};
 
-/// SI buffer of 40 entries (4 episodes of 10 steps), batches of 8, rounds due from the third
-/// episode on.
+/// SI on, its buffer of 40 entries (4 episodes of 10 steps), batches of 8, rounds due from the
+/// third episode on.
 fn config() -> Config {
-    let mut c = common::config();
-    c.asi.self_imitation = true;
-    c.asi.si_start_episode = 2;
-    c.asi.si_batch_size = 8;
-    c.asi.si_buffer_capacity = 40;
-    c.validate().unwrap();
-    c
-}
-
-/// Answers every query with a straight route of 6 points from its start to its end.
-struct StraightRoutes;
-
-impl RouteSource for StraightRoutes {
-    fn routes(&mut self, queries: &[RouteQuery], _phi_version: PhiVersion) -> RoutesReply {
-        let line = |q: &RouteQuery| -> Vec<LatentPoint> {
-            (0..6)
-                .map(|i| {
-                    let f = i as f32 / 5.0;
-                    [
-                        q.start[0] + f * (q.end[0] - q.start[0]),
-                        q.start[1] + f * (q.end[1] - q.start[1]),
-                    ]
-                })
-                .collect()
-        };
-        RoutesReply::Answered(
-            queries
-                .iter()
-                .map(|q| RouteAnswer::Direct(line(q)))
-                .collect(),
-        )
-    }
+    si_config(true, 40)
 }
 
 /// Answers every query with the same route of 6 points of ±3e38 (finite, so usable).
@@ -77,68 +46,15 @@ impl RouteSource for HugeRoutes {
     }
 }
 
-/// The overflowing state at time `t`: all components ±3e38, the sign alternating with `t`.
-fn huge_state(t: usize) -> [f32; 3] {
-    let sign = if t.is_multiple_of(2) { 1.0 } else { -1.0 };
-    [sign * 3.0e38; 3]
-}
-
-/// Ingests episode `ep` (10 steps, one chunk), its states huge or the common ones.
-fn ingest_episode_of(l: &mut Learner, ep: u64, huge: bool) {
-    let mut records = steps(0..10, ep, 2, 9);
-    if huge {
-        for (t, r) in records.iter_mut().enumerate() {
-            r.obs = huge_state(t).to_vec();
-            r.next_obs = huge_state(t + 1).to_vec();
-        }
-    }
-    let flags =
-        TrajectoryFlags::EPISODE_START | TrajectoryFlags::EPISODE_END | TrajectoryFlags::TRUNCATED;
-    ingest(l, 0, ep, 0, &records, flags).unwrap();
-}
-
-/// The values of the policy variables whose names start with `prefix`, name-sorted.
-fn policy_values(l: &Learner, prefix: &str) -> Vec<u32> {
-    let data = l.policy_varmap().data().lock().unwrap();
-    let mut names: Vec<_> = data
-        .keys()
-        .filter(|k| k.starts_with(prefix))
-        .cloned()
-        .collect();
-    names.sort();
-    // Bit patterns, so that the comparison is exact (and NaN would not equal itself).
-    names
-        .iter()
-        .flat_map(|n| {
-            data[n]
-                .as_tensor()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f32>()
-                .unwrap()
-                .into_iter()
-                .map(f32::to_bits)
-        })
-        .collect()
-}
-
 fn stats(l: &Learner) -> SiStats {
     *l.self_imitation().stats()
-}
-
-fn metric(l: &Learner, name: &str) -> f64 {
-    l.metrics()
-        .into_iter()
-        .find(|(n, _)| *n == name)
-        .unwrap_or_else(|| panic!("{name} missing"))
-        .1
 }
 
 /// A learner whose SI buffer holds only the huge states of 3 episodes, one round due.
 fn fed_huge_states() -> Learner {
     let mut l = Learner::new(&config(), DIMS, 7).unwrap();
     for ep in 0..3 {
-        ingest_episode_of(&mut l, ep, true);
+        ingest_episode_in_one_chunk(&mut l, ep, true);
     }
     assert_eq!((l.self_imitation().buffer().len(), l.si_pending()), (30, 1));
     l
@@ -181,7 +97,10 @@ fn with_ordinary_routes_only_the_non_finite_high_step_is_skipped() {
     );
     // Routes along φ of the huge states: the usable ones lead far away (the high loss
     // overflows); π_lo, saturated, has a finite loss and gradient and takes its step.
-    assert_eq!(l.train_self_imitation(&mut StraightRoutes).unwrap(), 1);
+    assert_eq!(
+        l.train_self_imitation(&mut StraightRoutes::new(6)).unwrap(),
+        1
+    );
     let s = stats(&l);
     assert_eq!((s.skipped_nonfinite, s.high_steps, s.low_steps), (1, 0, 1));
     assert_eq!(policy_values(&l, "high_policy"), high0, "π_hi untouched");
@@ -201,7 +120,7 @@ fn self_imitation_trains_normally_once_the_bad_entries_are_evicted() {
     assert_eq!(stats(&l).skipped_nonfinite, 2);
     // Four ordinary episodes fill the 40 entries; the huge ones are evicted a quarter at a time.
     for ep in 3..7 {
-        ingest_episode_of(&mut l, ep, false);
+        ingest_episode_in_one_chunk(&mut l, ep, false);
     }
     assert_eq!(l.self_imitation().buffer().n_evicted(), 30);
     assert_eq!(l.si_pending(), 4);
@@ -211,7 +130,7 @@ fn self_imitation_trains_normally_once_the_bad_entries_are_evicted() {
     );
     let mut steps = 0;
     while l.si_pending() > 0 {
-        steps += l.train_self_imitation(&mut StraightRoutes).unwrap();
+        steps += l.train_self_imitation(&mut StraightRoutes::new(6)).unwrap();
     }
     assert_eq!(steps, 8, "four rounds, a high and a low step each");
     let s = stats(&l);

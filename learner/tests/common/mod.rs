@@ -1,10 +1,15 @@
-//! Shared helpers for the learner tests: a tiny valid config, task dims, hand-built step
-//! records and chunk headers.
+//! Shared helpers for the learner tests: a tiny valid config (and its φ and SI variants), task
+//! dims, hand-built step records and chunk headers, overflowing states, a straight-line route
+//! source, and readers of the learner's metrics and parameters.
 #![allow(dead_code)]
 
-use learner::{Learner, TaskDims};
+use candle_core::{DType, Device};
+use candle_nn::VarBuilder;
+use learner::{Learner, RouteSource, RoutesReply, TaskDims};
+use nets::{prefix, Encoder};
+use protocol::graph::{LatentPoint, RouteAnswer, RouteQuery};
 use protocol::{
-    ActorId, Config, DecisionKind, EpisodeId, PolicyVersion, StepLayout, StepRecord,
+    ActorId, Config, DecisionKind, EpisodeId, PhiVersion, PolicyVersion, StepLayout, StepRecord,
     TrajectoryFlags, TrajectoryHeader,
 };
 
@@ -137,5 +142,145 @@ pub fn ingest_episode(
             flags |= TrajectoryFlags::EPISODE_END | TrajectoryFlags::TRUNCATED;
         }
         ingest(l, actor, ep, i as u32, part, flags).unwrap();
+    }
+}
+
+/// [`config`] with φ rounds after 4 and 8 episodes, 300 steps each, batch 16, lr 0.01,
+/// k = c = 2.
+pub fn phi_config() -> Config {
+    let mut c = config();
+    c.encoder.first_round_episode = 4;
+    c.encoder.interval_episodes = 4;
+    c.encoder.steps_per_round = 300;
+    c.encoder.batch_size = 16;
+    c.encoder.lr = 0.01;
+    c.validate().unwrap();
+    c
+}
+
+/// [`config`] with self-imitation on or off, rounds due from the third training episode on
+/// (`si_start_episode` 2), SI batches of 8 and an SI buffer of `buffer_capacity` entries.
+pub fn si_config(self_imitation: bool, buffer_capacity: u64) -> Config {
+    let mut c = config();
+    c.asi.self_imitation = self_imitation;
+    c.asi.si_start_episode = 2;
+    c.asi.si_batch_size = 8;
+    c.asi.si_buffer_capacity = buffer_capacity;
+    c.validate().unwrap();
+    c
+}
+
+/// An overflowing but finite state at time `t` (the protocol refuses NaN and infinities): all
+/// components ±3e38, the sign alternating with `t` so that neighbours are far apart.
+pub fn huge_state(t: usize) -> [f32; 3] {
+    let sign = if t.is_multiple_of(2) { 1.0 } else { -1.0 };
+    [sign * 3.0e38; 3]
+}
+
+/// Ingests episode `ep` of 10 steps from actor 0 in one chunk (decisions every 2 steps, the
+/// last step truncated), its states [`huge_state`]s or those of [`step`].
+pub fn ingest_episode_in_one_chunk(l: &mut Learner, ep: u64, huge: bool) {
+    let mut records = steps(0..10, ep, 2, 9);
+    if huge {
+        for (t, r) in records.iter_mut().enumerate() {
+            r.obs = huge_state(t).to_vec();
+            r.next_obs = huge_state(t + 1).to_vec();
+        }
+    }
+    let flags =
+        TrajectoryFlags::EPISODE_START | TrajectoryFlags::EPISODE_END | TrajectoryFlags::TRUNCATED;
+    ingest(l, 0, ep, 0, &records, flags).unwrap();
+}
+
+/// The value of metric `name` (panics if the learner does not report it).
+pub fn metric(l: &Learner, name: &str) -> f64 {
+    l.metrics()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+        .unwrap_or_else(|| panic!("{name} missing"))
+        .1
+}
+
+/// The learner's current φ (sharing its parameters).
+pub fn encoder_of(l: &Learner) -> Encoder {
+    let vb = VarBuilder::from_varmap(l.policy_varmap(), DType::F32, &Device::Cpu);
+    let spec = l.nets_spec();
+    Encoder::new(
+        &vb.pp(prefix::ENCODER),
+        spec.obs_dim,
+        &spec.encoder_hidden,
+        spec.latent_dim,
+    )
+    .unwrap()
+}
+
+/// The values of the published variables whose names start with `prefix`, name-sorted, as bit
+/// patterns so that a comparison is exact (and NaN would not equal itself).
+pub fn policy_values(l: &Learner, prefix: &str) -> Vec<u32> {
+    let data = l.policy_varmap().data().lock().unwrap();
+    let mut names: Vec<_> = data
+        .keys()
+        .filter(|k| k.starts_with(prefix))
+        .cloned()
+        .collect();
+    names.sort();
+    names
+        .iter()
+        .flat_map(|n| {
+            data[n]
+                .as_tensor()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap()
+                .into_iter()
+                .map(f32::to_bits)
+        })
+        .collect()
+}
+
+/// Answers every query with a straight route of `nodes` points from its start to its end
+/// (`Direct`), or reports a φ mismatch when `mismatch` is set; records what it was asked.
+pub struct StraightRoutes {
+    pub nodes: usize,
+    pub mismatch: bool,
+    pub asked: Vec<(Vec<RouteQuery>, PhiVersion)>,
+}
+
+impl StraightRoutes {
+    pub fn new(nodes: usize) -> Self {
+        Self {
+            nodes,
+            mismatch: false,
+            asked: Vec::new(),
+        }
+    }
+}
+
+impl RouteSource for StraightRoutes {
+    fn routes(&mut self, queries: &[RouteQuery], phi_version: PhiVersion) -> RoutesReply {
+        self.asked.push((queries.to_vec(), phi_version));
+        if self.mismatch {
+            return RoutesReply::PhiMismatch {
+                graph: PhiVersion(phi_version.0 + 1),
+            };
+        }
+        let line = |q: &RouteQuery| -> Vec<LatentPoint> {
+            (0..self.nodes)
+                .map(|i| {
+                    let f = i as f32 / (self.nodes - 1).max(1) as f32;
+                    [
+                        q.start[0] + f * (q.end[0] - q.start[0]),
+                        q.start[1] + f * (q.end[1] - q.start[1]),
+                    ]
+                })
+                .collect()
+        };
+        RoutesReply::Answered(
+            queries
+                .iter()
+                .map(|q| RouteAnswer::Direct(line(q)))
+                .collect(),
+        )
     }
 }
