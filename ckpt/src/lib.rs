@@ -26,7 +26,8 @@ use serde::{Deserialize, Serialize};
 /// The safetensors metadata key of our metadata (a JSON object of strings).
 pub const META_KEY: &str = "asi_checkpoint";
 
-/// Why a checkpoint folder could not be written or read.
+/// Why a checkpoint folder could not be written, read or used. The learner's and the
+/// graph-service's `CheckpointError`s wrap it and add what only they can fail at.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
     /// A file or folder could not be read or written.
@@ -46,6 +47,22 @@ pub enum FileError {
         /// What is wrong with it.
         problem: String,
     },
+    /// The checkpoint was written by another format, protocol, network layout or config (its
+    /// manifest says which).
+    #[error(
+        "checkpoint {} is incompatible: its {what} is {found}, this run needs {expected}",
+        path.display()
+    )]
+    Incompatible {
+        /// The manifest.
+        path: PathBuf,
+        /// Which property differs.
+        what: String,
+        /// The value this run needs.
+        expected: String,
+        /// The checkpoint's value.
+        found: String,
+    },
 }
 
 /// [`FileError::Io`] of `path`.
@@ -61,6 +78,22 @@ pub fn corrupt(path: &Path, problem: impl Into<String>) -> FileError {
     FileError::Corrupt {
         path: path.to_path_buf(),
         problem: problem.into(),
+    }
+}
+
+/// [`FileError::Incompatible`]: the manifest at `path` has `found` for `what`, this run needs
+/// `expected`.
+pub fn incompatible(
+    path: &Path,
+    what: impl Into<String>,
+    expected: String,
+    found: String,
+) -> FileError {
+    FileError::Incompatible {
+        path: path.to_path_buf(),
+        what: what.into(),
+        expected,
+        found,
     }
 }
 

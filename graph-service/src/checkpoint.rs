@@ -30,7 +30,8 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
-use ckpt::{array, meta, Array, FileEntry, FileError, TmpFolder};
+pub use ckpt::FileError;
+use ckpt::{array, meta, Array, FileEntry, TmpFolder};
 use protocol::{ActorId, Config, EpisodeId, LatentPoint, PhiVersion, PROTOCOL_VERSION};
 use rand_pcg::Pcg64;
 use safetensors::SafeTensors;
@@ -62,51 +63,13 @@ const STATE_FILE: &str = "state.json";
 /// Why a graph-service checkpoint could not be written or restored.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
-    /// A file or folder could not be read or written.
-    #[error("checkpoint {}: {source}", path.display())]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A file is missing, truncated, fails its checksum or holds something unexpected.
-    #[error("checkpoint file {} is corrupt: {problem}", path.display())]
-    Corrupt {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong with it.
-        problem: String,
-    },
-    /// The checkpoint was written by another format or protocol, or for other state-shaping
-    /// config values.
-    #[error(
-        "checkpoint {} is incompatible: its {what} is {found}, this run needs {expected}",
-        path.display()
-    )]
-    Incompatible {
-        /// The manifest.
-        path: PathBuf,
-        /// Which property differs.
-        what: String,
-        /// The value this service needs.
-        expected: String,
-        /// The checkpoint's value.
-        found: String,
-    },
+    /// A file could not be read or written, is corrupt, or the checkpoint is incompatible
+    /// (another format or protocol, or other state-shaping config values).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// Building the fresh service or its φ failed.
     #[error(transparent)]
     Service(#[from] GraphServiceError),
-}
-
-impl From<FileError> for CheckpointError {
-    fn from(err: FileError) -> Self {
-        match err {
-            FileError::Io { path, source } => CheckpointError::Io { path, source },
-            FileError::Corrupt { path, problem } => CheckpointError::Corrupt { path, problem },
-        }
-    }
 }
 
 fn corrupt(path: &Path, problem: impl Into<String>) -> CheckpointError {
@@ -309,11 +272,8 @@ fn check_compatible(
     manifest: &Manifest,
     path: &Path,
 ) -> Result<(), CheckpointError> {
-    let differ = |what: &str, expected: String, found: String| CheckpointError::Incompatible {
-        path: path.to_path_buf(),
-        what: what.to_owned(),
-        expected,
-        found,
+    let differ = |what: &str, expected: String, found: String| -> CheckpointError {
+        ckpt::incompatible(path, what, expected, found).into()
     };
     if manifest.format_version != FORMAT_VERSION {
         return Err(differ(

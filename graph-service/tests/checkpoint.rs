@@ -7,7 +7,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use common::*;
-use graph_service::checkpoint::{CheckpointError, Manifest, MANIFEST, SUBDIR};
+use graph_service::checkpoint::{CheckpointError, FileError, Manifest, MANIFEST, SUBDIR};
 use graph_service::GraphService;
 use protocol::graph::{ReachSample, RouteAnswer, RouteQuery};
 use protocol::{GraphRequest, GraphResponse};
@@ -195,7 +195,7 @@ fn a_flipped_byte_is_refused_as_corrupt_naming_the_file() {
     bytes[middle] ^= 0x01;
     fs::write(&file, bytes).unwrap();
     match restore_err(&path) {
-        CheckpointError::Corrupt { path, problem } => {
+        CheckpointError::File(FileError::Corrupt { path, problem }) => {
             assert_eq!(path, file);
             assert!(problem.contains("checksum"), "{problem}");
         }
@@ -211,7 +211,7 @@ fn a_truncated_file_is_refused_as_corrupt() {
     let bytes = fs::read(&file).unwrap();
     fs::write(&file, &bytes[..bytes.len() - 7]).unwrap();
     match restore_err(&path) {
-        CheckpointError::Corrupt { path, problem } => {
+        CheckpointError::File(FileError::Corrupt { path, problem }) => {
             assert_eq!(path, file);
             assert!(problem.contains("truncated"), "{problem}");
         }
@@ -223,7 +223,7 @@ fn a_truncated_file_is_refused_as_corrupt() {
     fs::write(&manifest, &text[..text.len() / 2]).unwrap();
     assert!(matches!(
         restore_err(&path),
-        CheckpointError::Corrupt { .. }
+        CheckpointError::File(FileError::Corrupt { .. })
     ));
     remove(&dir);
 }
@@ -241,12 +241,12 @@ fn another_format_version_or_config_shape_is_refused_as_incompatible() {
     let (dir, path) = saved("incompatible");
     edit_manifest(&path, |m| m.format_version += 1);
     match restore_err(&path) {
-        CheckpointError::Incompatible {
+        CheckpointError::File(FileError::Incompatible {
             what,
             expected,
             found,
             ..
-        } => {
+        }) => {
             assert_eq!(what, "format version");
             assert_eq!(
                 found.parse::<u32>().unwrap(),
@@ -261,7 +261,7 @@ fn another_format_version_or_config_shape_is_refused_as_incompatible() {
     other.graph.cell_size = 2.0;
     let err = GraphService::restore(&path, &other, dims()).unwrap_err();
     assert!(
-        matches!(&err, CheckpointError::Incompatible { what, .. } if what == "graph.cell_size"),
+        matches!(&err, CheckpointError::File(FileError::Incompatible { what, .. }) if what == "graph.cell_size"),
         "{err}"
     );
     assert!(err.to_string().contains("this run needs 2"), "{err}");
@@ -307,7 +307,10 @@ fn a_damaged_newest_checkpoint_falls_back_to_the_previous_one() {
     assert_eq!(resumed.restored.unwrap().1.path, first.path);
     assert_eq!(resumed.refused.len(), 1);
     assert_eq!(resumed.refused[0].0, second.path);
-    assert!(matches!(resumed.refused[0].1, CheckpointError::Io { .. }));
+    assert!(matches!(
+        resumed.refused[0].1,
+        CheckpointError::File(FileError::Io { .. })
+    ));
     let empty = GraphService::restore_newest_valid(&dir.join("none"), &config, dims()).unwrap();
     assert!(empty.restored.is_none() && empty.refused.is_empty());
     remove(&dir);

@@ -73,38 +73,10 @@ const TMP_PREFIX: &str = ".tmp-ckpt-";
 /// Why a checkpoint could not be written or restored.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
-    /// A file or folder could not be read or written.
-    #[error("checkpoint {}: {source}", path.display())]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A file is missing, truncated, fails its checksum or holds something unexpected.
-    #[error("checkpoint file {} is corrupt: {problem}", path.display())]
-    Corrupt {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong with it.
-        problem: String,
-    },
-    /// The checkpoint was written by another format, protocol, network layout or config.
-    #[error(
-        "checkpoint {} is incompatible: its {what} is {found}, this run needs {expected}",
-        path.display()
-    )]
-    Incompatible {
-        /// The manifest.
-        path: PathBuf,
-        /// Which property differs.
-        what: &'static str,
-        /// The value this learner needs.
-        expected: String,
-        /// The checkpoint's value.
-        found: String,
-    },
+    /// A file could not be read or written, is corrupt, or the checkpoint is incompatible
+    /// (another format, protocol, network layout or config).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// A φ round is running; its sampling state is not saved (try again after the round).
     #[error("no checkpoint while a φ round runs; retry when the round has finished")]
     RoundActive,
@@ -178,20 +150,8 @@ fn list_checkpoints(dir: &Path) -> Result<Vec<(u64, PathBuf)>, CheckpointError> 
     Ok(ckpt::list(dir, PREFIX)?)
 }
 
-impl From<FileError> for CheckpointError {
-    fn from(err: FileError) -> Self {
-        match err {
-            FileError::Io { path, source } => CheckpointError::Io { path, source },
-            FileError::Corrupt { path, problem } => CheckpointError::Corrupt { path, problem },
-        }
-    }
-}
-
 fn corrupt(path: &Path, problem: impl Into<String>) -> CheckpointError {
-    CheckpointError::Corrupt {
-        path: path.to_path_buf(),
-        problem: problem.into(),
-    }
+    ckpt::corrupt(path, problem).into()
 }
 
 /// One piece of learner state and its file.
@@ -363,13 +323,8 @@ fn check_compatible(
     manifest: &Manifest,
     path: &Path,
 ) -> Result<(), CheckpointError> {
-    let differ = |what, expected: String, found: String| {
-        Err(CheckpointError::Incompatible {
-            path: path.to_path_buf(),
-            what,
-            expected,
-            found,
-        })
+    let differ = |what: &str, expected: String, found: String| {
+        Err(ckpt::incompatible(path, what, expected, found).into())
     };
     if manifest.format_version != FORMAT_VERSION {
         return differ(
