@@ -43,8 +43,8 @@ use rand_pcg::Pcg64Mcg;
 use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
-use ckpt::{array, meta, parse as parse_safetensors, serialize, FileError, TmpFolder};
-pub use ckpt::{checksum, FileEntry};
+use ckpt::{array, meta, parse as parse_safetensors, serialize, TmpFolder};
+pub use ckpt::{checksum, FileEntry, FileError};
 
 use super::{IngestStats, Learner, PublishState};
 use crate::adam::{Adam, AdamState};
