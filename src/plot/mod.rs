@@ -9,7 +9,8 @@
 //! Aggregation: every seed's curve is linearly interpolated onto a common grid from 0 to the
 //! smallest final x among the arm's seeds (no extrapolation), then mean and
 //! `t(0.975, n−1) · sd / √n` per grid point; the drawn band is clipped to [0, 1] when every
-//! value lies in it (rates and fractions cannot leave it).
+//! value lies in it (rates and fractions cannot leave it), and at 0 from below when every value
+//! is ≥ 0 (distances, counts).
 //!
 //! Also used by the launcher to keep `run_dir/plots/curves.png` current during a run.
 
@@ -164,6 +165,19 @@ pub fn t_975(df: usize) -> f64 {
     }
 }
 
+/// The range an arm's band is clipped to: [0, 1] when every value of every seed lies in it,
+/// [0, ∞) when every value is ≥ 0, none otherwise.
+fn value_range(seeds: &[&Series]) -> Option<(f64, f64)> {
+    let all = |keep: &dyn Fn(f64) -> bool| seeds.iter().all(|s| s.y.iter().all(|&y| keep(y)));
+    if all(&|y| (0.0..=1.0).contains(&y)) {
+        Some((0.0, 1.0))
+    } else if all(&|y| y >= 0.0) {
+        Some((0.0, f64::INFINITY))
+    } else {
+        None
+    }
+}
+
 /// Mean and 95 % band of the seeds' curves on a common grid (see the module doc).
 pub fn aggregate(seeds: &[Series]) -> Option<Band> {
     let seeds: Vec<&Series> = seeds.iter().filter(|s| !s.x.is_empty()).collect();
@@ -185,10 +199,7 @@ pub fn aggregate(seeds: &[Series]) -> Option<Band> {
         mean: Vec::new(),
         half_width: Vec::new(),
         n_seeds: n,
-        clip: seeds
-            .iter()
-            .all(|s| s.y.iter().all(|y| (0.0..=1.0).contains(y)))
-            .then_some((0.0, 1.0)),
+        clip: value_range(&seeds),
     };
     for k in 0..steps {
         let x = if steps == 1 {
@@ -575,7 +586,7 @@ mod tests {
     }
 
     #[test]
-    fn a_band_of_rates_is_clipped_to_zero_and_one_and_other_bands_are_not() {
+    fn a_band_of_rates_is_clipped_to_zero_and_one_of_distances_at_zero_and_others_not_at_all() {
         // Success rates 1, 1, 0.7 at the end: mean 0.9, sd √0.03, half-width
         // 4.303 · √0.03 / √3 = 0.4303, so the upper edge 1.33 is clipped to 1 and the lower
         // edge 0.4697 is not. At x = 5 (0.5, 0.5, 0.35) the band lies inside [0, 1].
@@ -603,6 +614,19 @@ mod tests {
         assert_eq!(q.clip, None);
         let m = *q.mean.last().unwrap();
         assert!((q.upper().last().unwrap() - (m + q.half_width.last().unwrap())).abs() < 1e-12);
+        // A distance (≥ 0, beyond 1): final values 1, 2, 15 → mean 6, sd 7.81, half-width
+        // 4.303 · 7.81 / √3 = 19.4, so the lower edge −13.4 is clipped to 0, the upper is not.
+        let d = aggregate(&[
+            series(&[(0.0, 20.0), (10.0, 1.0)]),
+            series(&[(0.0, 18.0), (10.0, 2.0)]),
+            series(&[(0.0, 16.0), (10.0, 15.0)]),
+        ])
+        .unwrap();
+        assert_eq!(d.clip, Some((0.0, f64::INFINITY)));
+        let (m, h) = (*d.mean.last().unwrap(), *d.half_width.last().unwrap());
+        assert!((m - 6.0).abs() < 1e-12 && (h - 4.303 * 61f64.sqrt() / 3f64.sqrt()).abs() < 1e-3);
+        assert_eq!(*d.lower().last().unwrap(), 0.0);
+        assert_eq!(*d.upper().last().unwrap(), m + h);
     }
 
     #[test]
