@@ -42,7 +42,9 @@ use crate::chunk::{header_for, Chunk, ChunkBuffer};
 use crate::episode::{DecisionCounters, Episode, Rollout, RolloutParams, StepOutcome};
 use crate::error::{ActorError, WeightsRejection};
 use crate::exploration::DeterministicNoise;
-use crate::frontier::{assign, Assignment, FrontierEpisode, FrontierParams, FrontierStats};
+use crate::frontier::{
+    assign, Assignment, FrEnd, FrOutcome, FrontierEpisode, FrontierParams, FrontierStats,
+};
 use crate::networks::ActorNets;
 use crate::oracle::GraphOracle;
 use crate::record::RecordWriter;
@@ -122,6 +124,12 @@ pub struct ActorStats {
     pub last_episode_far_goal: bool,
     /// Frontier-reaching counters (SPEC §6.6).
     pub frontier: FrontierStats,
+    /// Where the navigation of the last finished FR episode ended (`None` before one).
+    #[serde(default)]
+    pub last_fr_end: Option<FrEnd>,
+    /// `episodes` when that FR episode finished (tells which episode `last_fr_end` is).
+    #[serde(default)]
+    pub last_fr_episode: u64,
 }
 
 /// One actor: an environment, the actor-side networks, and the episode in progress.
@@ -248,6 +256,8 @@ impl Actor {
                 last_episode_explore_reach_error: None,
                 last_episode_far_goal: false,
                 frontier: FrontierStats::default(),
+                last_fr_end: None,
+                last_fr_episode: 0,
             },
         })
     }
@@ -479,6 +489,13 @@ impl Actor {
             stats.n_reach_ratio_segments += episode.reach_ratio.n;
             stats.last_episode_reach_ratio = episode.reach_ratio.mean();
             stats.last_episode_explore_reach_error = episode.reach_explore.mean();
+            if let Some(end) = episode.frontier_end() {
+                stats.last_fr_end = Some(end);
+                stats.last_fr_episode = stats.episodes;
+                if end.outcome == FrOutcome::Navigating {
+                    self.rollout.frontier_stats.n_navigating_at_end += 1;
+                }
+            }
             tracing::debug!(
                 actor = self.actor_id.0,
                 episode = episode.id.0,

@@ -26,7 +26,9 @@ use rand_pcg::Pcg64Mcg;
 
 use crate::error::ActorError;
 use crate::exploration::{clip, low_action, noise_free_low_action, DeterministicNoise};
-use crate::frontier::{FrChoice, FrontierEpisode, FrontierParams, FrontierStats, Switch};
+use crate::frontier::{
+    FrChoice, FrEnd, FrOutcome, FrontierEpisode, FrontierParams, FrontierStats, Switch,
+};
 use crate::networks::ActorNets;
 use crate::oracle::GraphOracle;
 use crate::record::{RecordWriter, StepFields};
@@ -141,6 +143,8 @@ pub(crate) struct Episode {
     pub reach_samples: Vec<ReachSample>,
     /// FR state, for frontier-reaching episodes.
     pub frontier: Option<FrontierEpisode>,
+    /// Where the FR episode's navigation ended, once it has (a switch or a new φ).
+    fr_end: Option<FrEnd>,
     /// The segment in progress is FR navigation: the low level acts without noise.
     low_noise_free: bool,
     /// Source of the segment in progress (`None` before the first decision).
@@ -183,6 +187,7 @@ impl Episode {
             segment_start_distance: None,
             reach_samples: Vec::new(),
             frontier,
+            fr_end: None,
             low_noise_free: false,
             segment_source: None,
             candidate: None,
@@ -330,6 +335,13 @@ impl Episode {
             return Ok(None);
         }
         let decided = fr.decide(at, &params, rollout.phi_version, &mut rollout.rng, oracle)?;
+        if let (Some(switch), None) = (decided.switch, self.fr_end) {
+            let outcome = match switch {
+                Switch::NearFrontier => FrOutcome::NearFrontier,
+                Switch::Stuck => FrOutcome::Stuck,
+            };
+            self.fr_end = Some(fr.navigation_end(outcome, &at, &self.obs));
+        }
         self.subgoal.copy_from_slice(&decided.subgoal);
         for ((d, sg), phi) in self.delta.iter_mut().zip(&decided.subgoal).zip(&self.phi) {
             *d = sg - phi;
@@ -365,11 +377,25 @@ impl Episode {
     pub fn end_frontier_for_new_phi(&mut self) -> bool {
         match self.frontier.as_mut() {
             Some(fr) if fr.is_active() => {
+                if self.fr_end.is_none() {
+                    // φ(s_t) is still the old φ here: the route's coordinates.
+                    self.fr_end = Some(fr.navigation_end(FrOutcome::NewPhi, &self.phi, &self.obs));
+                }
                 fr.end();
                 true
             }
             _ => false,
         }
+    }
+
+    /// For an FR episode, where its navigation ended: at its switch or new φ, else here
+    /// ([`FrOutcome::Navigating`], at the last state); `None` for other episodes.
+    pub fn frontier_end(&self) -> Option<FrEnd> {
+        let fr = self.frontier.as_ref()?;
+        Some(
+            self.fr_end
+                .unwrap_or_else(|| fr.navigation_end(FrOutcome::Navigating, &self.phi, &self.obs)),
+        )
     }
 
     /// The low level's action on `[obs, φ(obs), subgoal]` — noise-free in FR navigation

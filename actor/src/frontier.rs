@@ -98,6 +98,54 @@ pub struct FrontierStats {
     pub n_stuck_switches: u64,
     /// FR episodes whose FR mode ended because a new φ arrived mid-episode.
     pub n_ended_by_new_phi: u64,
+    /// FR episodes that ended still navigating: neither near the frontier nor stuck nor
+    /// ended by a new φ before the env ended the episode ([`FrOutcome::Navigating`]).
+    #[serde(default)]
+    pub n_navigating_at_end: u64,
+}
+
+/// How an FR episode's navigation ended: the first of a switch, a new φ, or the episode's end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum FrOutcome {
+    /// φ(s_t) came within ε of g_F ([`Switch::NearFrontier`]).
+    NearFrontier,
+    /// The agent was stuck ([`Switch::Stuck`]).
+    Stuck,
+    /// A new φ arrived mid-episode (the route belonged to the old φ-space).
+    NewPhi,
+    /// The episode ended (truncation, termination or a physics failure) while navigating.
+    Navigating,
+}
+
+impl FrOutcome {
+    /// The outcome as a metric value: 0 near the frontier, 1 stuck, 2 new φ, 3 navigating.
+    pub fn code(self) -> f64 {
+        match self {
+            Self::NearFrontier => 0.0,
+            Self::Stuck => 1.0,
+            Self::NewPhi => 2.0,
+            Self::Navigating => 3.0,
+        }
+    }
+}
+
+/// Where an FR episode's navigation ended ([`FrontierEpisode::navigation_end`]): the
+/// evidence for "why did FR not reach the frontier".
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrEnd {
+    /// How it ended.
+    pub outcome: FrOutcome,
+    /// Index of the route point nearest to φ(s_t) over the last index: 0 at the route's
+    /// start node, 1 at its last node (1 for a route of one node; 0 for an empty route).
+    pub route_progress: f32,
+    /// φ-distance from φ(s_t) to that nearest route point (how far off the route).
+    pub off_route: f32,
+    /// φ-distance from φ(s_t) to g_F.
+    pub frontier_distance: f32,
+    /// The env's first two observation coordinates (x, y of the maze tasks) at that moment.
+    pub xy: [f32; 2],
+    /// Waypoint decisions the episode took until then.
+    pub waypoint_decisions: u32,
 }
 
 /// The outcome of the FR draw at episode start.
@@ -237,6 +285,7 @@ pub struct FrontierEpisode {
     active: bool,
     prev: Option<LatentPoint>,
     prev2: Option<LatentPoint>,
+    n_waypoints: u32,
 }
 
 impl FrontierEpisode {
@@ -249,6 +298,7 @@ impl FrontierEpisode {
             active: true,
             prev: None,
             prev2: None,
+            n_waypoints: 0,
         }
     }
 
@@ -271,6 +321,27 @@ impl FrontierEpisode {
     /// Whether count mode is on (after a switch).
     pub fn in_count_mode(&self) -> bool {
         self.count_mode
+    }
+
+    /// Where navigation stands at `at` = φ(s_t), with the env's observation `obs` (its first
+    /// two coordinates are recorded as xy; missing ones as NaN), reported as `outcome`.
+    pub fn navigation_end(&self, outcome: FrOutcome, at: &[f32], obs: &[f32]) -> FrEnd {
+        let nearest = nearest_route_index(&self.route, at);
+        let route_progress = match (nearest, self.route.len()) {
+            (None, _) => 0.0,
+            (Some(_), 1) => 1.0,
+            (Some(i), n) => i as f32 / (n - 1) as f32,
+        };
+        let off_route = nearest.map_or(f32::NAN, |i| distance(&self.route[i], at));
+        let coordinate = |i: usize| obs.get(i).copied().unwrap_or(f32::NAN);
+        FrEnd {
+            outcome,
+            route_progress,
+            off_route,
+            frontier_distance: distance(&self.frontier, at),
+            xy: [coordinate(0), coordinate(1)],
+            waypoint_decisions: self.n_waypoints,
+        }
     }
 
     /// Ends FR mode: later decisions use the normal sources.
@@ -312,6 +383,7 @@ impl FrontierEpisode {
             let k = rng.random_range(params.k_range[0]..=params.k_range[1]);
             let index = waypoint_index(&self.route, &at, k);
             let subgoal = index.map_or(self.frontier, |i| self.route[i]);
+            self.n_waypoints += 1;
             (subgoal, FrChoice::Waypoint { k, index })
         };
         self.prev2 = self.prev;

@@ -3,8 +3,8 @@
 //! double for the graph-service; the actor's logic is the real one).
 
 use actor::frontier::{
-    assign, count_candidates, nearest_route_index, waypoint, Assignment, FrChoice, FrontierEpisode,
-    FrontierParams, Switch,
+    assign, count_candidates, nearest_route_index, waypoint, Assignment, FrChoice, FrEnd,
+    FrOutcome, FrontierEpisode, FrontierParams, Switch,
 };
 use actor::{
     Actor, ActorError, Chunk, ExploreAnswer, GraphOracle, GraphTransport, LeastVisitedAnswer,
@@ -288,6 +288,43 @@ fn stuck_over_the_two_previous_decisions_switches_to_count_mode_and_ends_fr_mode
 }
 
 #[test]
+fn the_navigation_end_reports_progress_along_the_route_and_the_distance_off_it() {
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let mut oracle = ScriptedOracle::new(no_route);
+    let mut fr = FrontierEpisode::new(found(x_route(), [18.0, 0.0]));
+    let p = params();
+    for at in [[0.0, 0.0], [3.0, 0.0]] {
+        fr.decide(at, &p, PhiVersion(0), &mut rng, &mut oracle)
+            .unwrap();
+    }
+    // Nearest node of (7.1, 3) is x = 8 (index 4 of 0..=9): progress 4/9, off the route by
+    // √(0.9² + 3²), 3 from y = 0 and 10.9 short of x = 18 in φ; xy = the observation's first two.
+    let end = fr.navigation_end(FrOutcome::Stuck, &[7.1, 3.0], &[1.5, -2.5, 9.0]);
+    let off = (0.9f32 * 0.9 + 9.0).sqrt();
+    let to_frontier = (10.9f32 * 10.9 + 9.0).sqrt();
+    assert_eq!(end.outcome, FrOutcome::Stuck);
+    assert!((end.route_progress - 4.0 / 9.0).abs() < 1e-6, "{end:?}");
+    assert!((end.off_route - off).abs() < 1e-5, "{end:?}");
+    assert!(
+        (end.frontier_distance - to_frontier).abs() < 1e-5,
+        "{end:?}"
+    );
+    assert_eq!((end.xy, end.waypoint_decisions), ([1.5, -2.5], 2));
+    // The ends of the route, a one-node route, and an observation without y.
+    let at_start = fr.navigation_end(FrOutcome::Navigating, &[-1.0, 0.0], &[0.0]);
+    assert_eq!(at_start.route_progress, 0.0);
+    assert!(at_start.xy[1].is_nan());
+    let at_last = fr.navigation_end(FrOutcome::Navigating, &[30.0, 0.0], &[0.0, 0.0]);
+    assert_eq!((at_last.route_progress, at_last.off_route), (1.0, 12.0));
+    let single = FrontierEpisode::new(found(vec![[1.0, 1.0]], [1.0, 1.0]));
+    let end = single.navigation_end(FrOutcome::NearFrontier, &[1.0, 2.0], &[0.0, 0.0]);
+    assert_eq!(
+        (end.route_progress, end.off_route, end.waypoint_decisions),
+        (1.0, 1.0, 0)
+    );
+}
+
+#[test]
 fn count_mode_draws_candidates_in_the_box_and_takes_the_oracles_least_visited() {
     let mut fr = FrontierEpisode::new(found(vec![[1.0, 1.0]], [1.0, 1.0]));
     let mut rng = Pcg64Mcg::seed_from_u64(3);
@@ -512,6 +549,34 @@ fn an_fr_episode_follows_the_route_with_waypoints_k_nodes_ahead_and_a_far_goal()
         (10, 0)
     );
     assert_eq!(actor.stats().n_decisions, 10);
+    // Never stuck, never near the frontier: the episode ends navigating, at its last state.
+    assert_eq!(stats.n_navigating_at_end, 1);
+    let last = records.last().unwrap();
+    let end = actor.stats().last_fr_end.expect("an FR episode finished");
+    assert_eq!(end.outcome, FrOutcome::Navigating);
+    assert_eq!(end.xy, [last.next_obs[0], last.next_obs[1]]);
+    assert_eq!(end.waypoint_decisions, 10);
+    assert_nav_end(&end, &route, &last.next_phi);
+    assert_eq!(actor.stats().last_fr_episode, actor.stats().episodes);
+}
+
+/// `end`'s route progress, distance off the route and to the frontier (the last route node)
+/// at φ = `at`, by brute force.
+fn assert_nav_end(end: &FrEnd, route: &[LatentPoint], at: &[f32]) {
+    let nearest = (0..route.len())
+        .min_by(|&a, &b| dist(&route[a], at).total_cmp(&dist(&route[b], at)))
+        .unwrap();
+    let progress = nearest as f32 / (route.len() - 1) as f32;
+    assert!((end.route_progress - progress).abs() < 1e-6, "{end:?}");
+    assert!(
+        (end.off_route - dist(&route[nearest], at)).abs() < 1e-4,
+        "{end:?}"
+    );
+    let frontier = route.last().unwrap();
+    assert!(
+        (end.frontier_distance - dist(frontier, at)).abs() < 1e-4,
+        "{end:?}"
+    );
 }
 
 fn dist(a: &[f32], b: &[f32]) -> f32 {
@@ -545,6 +610,13 @@ fn a_stuck_fr_episode_counts_once_then_decides_with_its_normal_source() {
         (stats.n_waypoint_decisions, stats.n_count_decisions),
         (2, 1)
     );
+    // The navigation ended at the stuck decision, after two waypoints.
+    assert_eq!(stats.n_navigating_at_end, 0);
+    let end = actor.stats().last_fr_end.expect("an FR episode finished");
+    assert_eq!((end.outcome, end.waypoint_decisions), (FrOutcome::Stuck, 2));
+    assert_eq!(end.xy, [decided[2].obs[0], decided[2].obs[1]]);
+    let route = straight_route(oracle.frontier_asked[0]).unwrap().route;
+    assert_nav_end(&end, &route, &decided[2].phi);
 }
 
 #[test]
@@ -567,6 +639,13 @@ fn near_the_frontier_every_decision_is_the_least_visited_candidate() {
         (stats.n_near_frontier_switches, stats.n_count_decisions),
         (1, 10)
     );
+    let end = actor.stats().last_fr_end.expect("an FR episode finished");
+    assert_eq!(
+        (end.outcome, end.waypoint_decisions, end.route_progress),
+        (FrOutcome::NearFrontier, 0, 1.0)
+    );
+    assert_eq!(end.xy, [decided[0].obs[0], decided[0].obs[1]]);
+    assert_eq!(stats.n_navigating_at_end, 0);
 }
 
 #[test]
@@ -585,6 +664,7 @@ fn without_a_route_the_episode_is_normal_and_the_fallback_is_counted() {
         (stats.n_episodes, stats.n_no_route, stats.n_goals_forced),
         (0, 2, 0)
     );
+    assert_eq!(actor.stats().last_fr_end, None, "no FR episode ran");
 }
 
 #[test]
@@ -621,6 +701,12 @@ fn a_new_phi_mid_episode_ends_fr_mode() {
     expected.extend([DecisionKind::Random; 4]);
     assert_eq!(kinds(&decided), expected);
     assert_eq!(actor.stats().frontier.n_ended_by_new_phi, 1);
+    assert_eq!(actor.stats().frontier.n_navigating_at_end, 0);
+    let end = actor.stats().last_fr_end.expect("an FR episode finished");
+    assert_eq!(
+        (end.outcome, end.waypoint_decisions),
+        (FrOutcome::NewPhi, 6)
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -215,6 +215,7 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
         ),
         ("actor/fr/stuck_switches", fr.n_stuck_switches),
         ("actor/fr/ended_by_new_phi", fr.n_ended_by_new_phi),
+        ("actor/fr/navigating_at_end", fr.n_navigating_at_end),
     ];
     values.extend(
         frontier
@@ -234,6 +235,33 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
             .into_iter()
             .filter_map(|(name, v)| Some((name.to_owned(), f64::from(v?)))),
     );
+    if let Some(end) = s.last_fr_end {
+        let last = [
+            ("actor/fr/last_episode", s.last_fr_episode as f64),
+            ("actor/fr/last_outcome", end.outcome.code()),
+            (
+                "actor/fr/last_route_progress",
+                f64::from(end.route_progress),
+            ),
+            ("actor/fr/last_off_route", f64::from(end.off_route)),
+            (
+                "actor/fr/last_frontier_distance",
+                f64::from(end.frontier_distance),
+            ),
+            ("actor/fr/last_x", f64::from(end.xy[0])),
+            ("actor/fr/last_y", f64::from(end.xy[1])),
+            (
+                "actor/fr/last_waypoint_decisions",
+                f64::from(end.waypoint_decisions),
+            ),
+        ];
+        // A NaN (no route point, an observation without y) is left out, not written.
+        values.extend(
+            last.into_iter()
+                .filter(|(_, v)| v.is_finite())
+                .map(|(name, v)| (name.to_owned(), v)),
+        );
+    }
     values
 }
 
