@@ -409,6 +409,12 @@ impl Actor {
             }
             Assignment::Frontier(fr) => {
                 stats.n_episodes += 1;
+                tracing::debug!(
+                    actor = self.actor_id.0,
+                    frontier = ?fr.frontier(),
+                    route = ?fr.route(),
+                    "FR episode assigned"
+                );
                 Some(fr)
             }
         })

@@ -342,6 +342,18 @@ impl Episode {
             };
             self.fr_end = Some(fr.navigation_end(outcome, &at, &self.obs));
         }
+        // The trace of an FR episode, for `RUST_LOG=actor=debug` (where do they get stuck).
+        tracing::debug!(
+            episode = self.id.0,
+            t = self.t,
+            xy = ?self.obs.get(..2),
+            phi = ?at,
+            choice = ?decided.choice,
+            subgoal = ?decided.subgoal,
+            switch = ?decided.switch,
+            route_len = fr.route().len(),
+            "FR decision"
+        );
         self.subgoal.copy_from_slice(&decided.subgoal);
         for ((d, sg), phi) in self.delta.iter_mut().zip(&decided.subgoal).zip(&self.phi) {
             *d = sg - phi;
