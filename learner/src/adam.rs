@@ -17,6 +17,8 @@
 //! and a resumed run would restart Adam from zero moments (a different trajectory). Speed: the
 //! moments live in plain `Vec<f32>`s and one pass over each parameter updates m, v and θ (one
 //! read of the gradient and θ, one write of θ) instead of a dozen temporary tensors.
+//! [`Adam::step_norm`] is that step, also returning the gradient's global L2 norm (a metric);
+//! [`Optimizer::step`] calls it, so reading the norm cannot change the update.
 //!
 //! Invariant: variables are f32 and keep their order; the exported state lists m and v per
 //! variable in that order, and an import must match the shapes exactly.
@@ -140,6 +142,28 @@ impl Adam {
     pub fn n_vars(&self) -> usize {
         self.slots.len()
     }
+
+    /// [`Optimizer::backward_step`] (the same update, bit for bit) that also returns the global
+    /// L2 norm of the loss gradient over this optimiser's variables (see [`Adam::step_norm`]).
+    pub fn backward_step_norm(&mut self, loss: &Tensor) -> candle_core::Result<f64> {
+        let grads = loss.backward()?;
+        self.step_norm(&grads)
+    }
+
+    /// [`Optimizer::step`] (it is the same code) that also returns `‖g‖₂ = √(Σ g²)` over the
+    /// gradients of this optimiser's variables: the loss gradient as given, before the weight
+    /// decay term; a variable without a gradient counts as zero. Summed in f64.
+    pub fn step_norm(&mut self, grads: &GradStore) -> candle_core::Result<f64> {
+        self.step += 1;
+        let coeffs = Coeffs::at(&self.params, self.step);
+        let mut sum_sq = 0.0;
+        for slot in &mut self.slots {
+            if let Some(grad) = grads.get(slot.var.as_tensor()) {
+                sum_sq += slot.apply(grad, &coeffs)?;
+            }
+        }
+        Ok(sum_sq.sqrt())
+    }
 }
 
 /// Why [`Adam::import_state`] refused a state.
@@ -202,25 +226,7 @@ impl Optimizer for Adam {
     }
 
     fn step(&mut self, grads: &GradStore) -> candle_core::Result<()> {
-        self.step += 1;
-        let p = self.params;
-        let t = i32::try_from(self.step).unwrap_or(i32::MAX);
-        let coeffs = Coeffs {
-            beta1: p.beta1 as f32,
-            beta2: p.beta2 as f32,
-            one_minus_beta1: (1.0 - p.beta1) as f32,
-            one_minus_beta2: (1.0 - p.beta2) as f32,
-            step_size: (p.lr / (1.0 - p.beta1.powi(t))) as f32,
-            inv_sqrt_bc2: (1.0 / (1.0 - p.beta2.powi(t)).sqrt()) as f32,
-            eps: p.eps as f32,
-            weight_decay: p.weight_decay as f32,
-        };
-        for slot in &mut self.slots {
-            if let Some(grad) = grads.get(slot.var.as_tensor()) {
-                slot.apply(grad, &coeffs)?;
-            }
-        }
-        Ok(())
+        self.step_norm(grads).map(|_| ())
     }
 
     fn learning_rate(&self) -> f64 {
@@ -247,10 +253,28 @@ struct Coeffs {
     weight_decay: f32,
 }
 
+impl Coeffs {
+    /// The constants of step `step` (t, counted from 1) under `p`.
+    fn at(p: &AdamParams, step: u64) -> Self {
+        let t = i32::try_from(step).unwrap_or(i32::MAX);
+        Self {
+            beta1: p.beta1 as f32,
+            beta2: p.beta2 as f32,
+            one_minus_beta1: (1.0 - p.beta1) as f32,
+            one_minus_beta2: (1.0 - p.beta2) as f32,
+            step_size: (p.lr / (1.0 - p.beta1.powi(t))) as f32,
+            inv_sqrt_bc2: (1.0 / (1.0 - p.beta2.powi(t)).sqrt()) as f32,
+            eps: p.eps as f32,
+            weight_decay: p.weight_decay as f32,
+        }
+    }
+}
+
 impl Slot {
-    /// One pass: m, v and θ for this variable's gradient.
-    fn apply(&mut self, grad: &Tensor, c: &Coeffs) -> candle_core::Result<()> {
+    /// One pass: m, v and θ for this variable's gradient; returns Σ g² of the gradient (f64).
+    fn apply(&mut self, grad: &Tensor, c: &Coeffs) -> candle_core::Result<f64> {
         let grad = grad.flatten_all()?.to_vec1::<f32>()?;
+        let sum_sq = grad.iter().map(|&g| f64::from(g) * f64::from(g)).sum();
         let theta = self.var.as_tensor();
         let mut next = theta.flatten_all()?.to_vec1::<f32>()?;
         for (((x, m), v), g) in next.iter_mut().zip(&mut self.m).zip(&mut self.v).zip(&grad) {
@@ -260,6 +284,7 @@ impl Slot {
             *x -= c.step_size * *m / (v.sqrt() * c.inv_sqrt_bc2 + c.eps);
         }
         let next = Tensor::from_vec(next, theta.shape(), theta.device())?;
-        self.var.set(&next)
+        self.var.set(&next)?;
+        Ok(sum_sq)
     }
 }

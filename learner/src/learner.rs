@@ -717,6 +717,8 @@ fn si_metrics(s: &SiStats, si: &SelfImitation) -> Vec<(&'static str, f64)> {
     vec![
         ("si/high_loss", s.high.loss),
         ("si/low_loss", s.low.loss),
+        ("si/high_grad_norm", s.high_grad_norm),
+        ("si/low_grad_norm", s.low_grad_norm),
         ("si/usable_fraction", s.usable_fraction),
         ("si/low_usable_fraction", s.low_usable_fraction),
         ("si/via_frontier_fraction", s.via_frontier_fraction),
@@ -749,6 +751,7 @@ struct SacNames {
     alpha: &'static str,
     entropy: &'static str,
     q: &'static str,
+    actor_grad_norm: &'static str,
 }
 
 const LOW_NAMES: SacNames = SacNames {
@@ -758,6 +761,7 @@ const LOW_NAMES: SacNames = SacNames {
     alpha: "charts/low_alpha",
     entropy: "charts/low_entropy",
     q: "charts/low_q",
+    actor_grad_norm: "charts/low_actor_grad_norm",
 };
 
 const HIGH_NAMES: SacNames = SacNames {
@@ -767,6 +771,7 @@ const HIGH_NAMES: SacNames = SacNames {
     alpha: "charts/high_alpha",
     entropy: "charts/high_entropy",
     q: "charts/high_q",
+    actor_grad_norm: "charts/high_actor_grad_norm",
 };
 
 /// The last update's statistics under `names`.
@@ -778,6 +783,7 @@ fn sac_metrics(s: &SacStats, names: SacNames) -> Vec<(&'static str, f64)> {
         (names.alpha, s.alpha),
         (names.entropy, s.actor.entropy),
         (names.q, 0.5 * (s.critic.q1_mean + s.critic.q2_mean)),
+        (names.actor_grad_norm, s.actor_grad_norm),
     ]
 }
 
@@ -794,7 +800,7 @@ fn deterministic_metrics(s: &DeterministicStats, lr: f64) -> Vec<(&'static str, 
         (LOW_NAMES.actor, s.actor_loss),
         (LOW_NAMES.q, s.critic.q_mean),
         ("charts/low_target_q", s.critic.target_mean),
-        ("charts/low_actor_grad_norm", s.actor_grad_norm),
+        (LOW_NAMES.actor_grad_norm, s.actor_grad_norm),
         ("charts/low_critic_grad_norm", s.critic_grad_norm),
         ("charts/low_kept_fraction", kept),
         ("charts/low_lr", lr),

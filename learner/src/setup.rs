@@ -56,13 +56,14 @@ pub enum LowLevel {
 }
 
 impl LowLevel {
-    /// One Adam step of the policy's optimiser on an extra policy loss (self-imitation).
+    /// One Adam step of the policy's optimiser on an extra policy loss (self-imitation);
+    /// returns the global L2 norm of its gradient over the low policy's variables.
     pub fn policy_step(
         &mut self,
         loss: &Tensor,
         what: &'static str,
         value: f64,
-    ) -> Result<(), LearnerError> {
+    ) -> Result<f64, LearnerError> {
         match self {
             Self::Sac(level) => level.policy_step(loss, what, value),
             Self::Deterministic(level) => level.policy_step(loss, what, value),

@@ -92,15 +92,40 @@ impl Problem {
         .unwrap()
     }
 
-    fn step(&self, opt: &mut Adam) {
+    fn loss(&self) -> Tensor {
         let pred = self
             .x
             .matmul(self.w.as_tensor())
             .unwrap()
             .broadcast_add(self.b.as_tensor())
             .unwrap();
-        let loss = (pred - &self.y).unwrap().sqr().unwrap().mean_all().unwrap();
-        opt.backward_step(&loss).unwrap();
+        (pred - &self.y).unwrap().sqr().unwrap().mean_all().unwrap()
+    }
+
+    fn step(&self, opt: &mut Adam) {
+        opt.backward_step(&self.loss()).unwrap();
+    }
+
+    /// ∂L/∂w and ∂L/∂b by hand, in f64: with r = x·w + b − y (3×3), ∂L/∂r = 2r/9,
+    /// ∂L/∂w = xᵀ·∂L/∂r, ∂L/∂b = the column sums of ∂L/∂r.
+    fn hand_gradient(&self) -> (Vec<f64>, Vec<f64>) {
+        let (w, b) = (self.w(), self.b());
+        let mut grad_w = vec![0.0; 6];
+        let mut grad_b = vec![0.0; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                let pred: f64 = (0..2)
+                    .map(|k| f64::from(X[2 * i + k]) * f64::from(w[3 * k + j]))
+                    .sum::<f64>()
+                    + f64::from(b[j]);
+                let d = 2.0 * (pred - f64::from(Y[3 * i + j])) / 9.0;
+                grad_b[j] += d;
+                for k in 0..2 {
+                    grad_w[3 * k + j] += f64::from(X[2 * i + k]) * d;
+                }
+            }
+        }
+        (grad_w, grad_b)
     }
 
     fn w(&self) -> Vec<f32> {
@@ -238,5 +263,88 @@ fn weight_decay_adds_lambda_theta_to_the_gradient_as_torch_adam() {
     assert!(
         (state.m[0][0] - 0.1 * 0.1 * 2.0).abs() < 1e-7,
         "m = (1 − β₁)·λθ"
+    );
+}
+
+fn l2(parts: &[&[f64]]) -> f64 {
+    parts
+        .iter()
+        .flat_map(|p| p.iter())
+        .map(|g| g * g)
+        .sum::<f64>()
+        .sqrt()
+}
+
+fn bits(values: &[f32]) -> Vec<u32> {
+    values.iter().map(|v| v.to_bits()).collect()
+}
+
+#[test]
+fn backward_step_norm_takes_the_same_steps_as_backward_step_bit_for_bit() {
+    let decayed = AdamParams {
+        weight_decay: 0.1,
+        ..AdamParams::with_lr(0.1)
+    };
+    for params in [AdamParams::with_lr(0.1), decayed] {
+        let (plain, measured) = (Problem::new(), Problem::new());
+        let vars = |p: &Problem| vec![p.w.clone(), p.b.clone()];
+        let mut opt_plain = Adam::new(vars(&plain), params).unwrap();
+        let mut opt_measured = Adam::new(vars(&measured), params).unwrap();
+        for _ in 0..4 {
+            opt_plain.backward_step(&plain.loss()).unwrap();
+            let norm = opt_measured.backward_step_norm(&measured.loss()).unwrap();
+            assert!(norm > 0.0, "{params:?}: a non-zero gradient");
+        }
+        assert_eq!(bits(&measured.w()), bits(&plain.w()), "{params:?}: w");
+        assert_eq!(bits(&measured.b()), bits(&plain.b()), "{params:?}: b");
+        assert_eq!(opt_measured.export_state(), opt_plain.export_state());
+    }
+}
+
+#[test]
+fn the_returned_norm_is_the_l2_norm_of_the_loss_gradient_over_the_optimizers_variables() {
+    let p = Problem::new();
+    let mut opt = p.optimizer();
+    for step in 1..=3 {
+        let (grad_w, grad_b) = p.hand_gradient();
+        let want = l2(&[&grad_w, &grad_b]);
+        let got = opt.backward_step_norm(&p.loss()).unwrap();
+        assert!(
+            (got - want).abs() <= 1e-6 * want,
+            "step {step}: got {got}, by hand {want}"
+        );
+    }
+    // An optimiser over w alone counts w's gradient only, though b has one too.
+    let q = Problem::new();
+    let mut w_only = Adam::new(vec![q.w.clone()], AdamParams::with_lr(0.1)).unwrap();
+    let (grad_w, grad_b) = q.hand_gradient();
+    let got = w_only.backward_step_norm(&q.loss()).unwrap();
+    let want = l2(&[&grad_w]);
+    assert!(
+        (got - want).abs() <= 1e-6 * want,
+        "w only: got {got}, by hand {want}"
+    );
+    assert!(
+        l2(&[&grad_w, &grad_b]) > want * (1.0 + 1e-3),
+        "b's gradient is not negligible"
+    );
+}
+
+#[test]
+fn the_returned_norm_leaves_out_the_weight_decay_term() {
+    let cpu = Device::Cpu;
+    let w = Var::from_slice(&[2.0f32, -0.5], 2, &cpu).unwrap();
+    let params = AdamParams {
+        weight_decay: 0.1,
+        ..AdamParams::with_lr(0.01)
+    };
+    let mut opt = Adam::new(vec![w.clone()], params).unwrap();
+    let zeros = Tensor::zeros(2, candle_core::DType::F32, &cpu).unwrap();
+    let loss = (w.as_tensor() * zeros).unwrap().sum_all().unwrap();
+    assert_eq!(opt.backward_step_norm(&loss).unwrap(), 0.0);
+    assert_ne!(
+        w.as_tensor().to_vec1::<f32>().unwrap(),
+        vec![2.0, -0.5],
+        "λ·θ still steps"
     );
 }

@@ -8,7 +8,9 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use common::*;
-use learner::learner::checkpoint::{latest_checkpoint, CheckpointError, Manifest, MANIFEST};
+use learner::learner::checkpoint::{
+    checksum, latest_checkpoint, CheckpointError, Manifest, MANIFEST,
+};
 use learner::Learner;
 
 /// φ rounds every 4 episodes (60 steps each), so the encoder's Adam and the φ store are live;
@@ -280,6 +282,7 @@ fn contents_that_pass_the_checksum_but_do_not_fit_are_refused() {
     let (_dir, ckpt) = saved("inconsistent");
     let file = ckpt.join("state.json");
     let text = fs::read_to_string(&file).unwrap();
+    eprintln!("{text}");
     let broken = text.replacen("\"updates_low\"", "\"updates_lo\"", 1);
     fs::write(&file, &broken).unwrap();
     let mut manifest = read_manifest(&ckpt);
@@ -342,4 +345,84 @@ fn another_network_layout_or_config_is_refused() {
     let mut longer = config();
     longer.run.seed += 1;
     Learner::restore_checkpoint(&longer, DIMS, &ckpt).unwrap();
+}
+
+#[test]
+fn a_checkpoint_written_before_the_gradient_norms_existed_loads_with_them_at_zero() {
+    let dir = scratch("before-grad-norms");
+    let original = trained();
+    let saved = original.save_checkpoint(&config(), &dir).unwrap();
+    // An older build wrote no gradient norms in `state.json`: take their lines out of the
+    // pretty-printed file (text, as a `serde_json::Value` cannot hold the generator's u128),
+    // drop the comma a removed last field leaves, and re-seal the manifest. SAC's norm is the
+    // line after `alpha_loss` (the deterministic level's `actor_grad_norm` is older and stays).
+    let file = saved.path.join("state.json");
+    let text = fs::read_to_string(&file).unwrap();
+    let all: Vec<&str> = text.lines().map(str::trim_start).collect();
+    let is_new = |i: usize| {
+        let line = all[i];
+        line.starts_with("\"si_high_grad_norm\":")
+            || line.starts_with("\"si_low_grad_norm\":")
+            || (line.starts_with("\"actor_grad_norm\":")
+                && all[i - 1].starts_with("\"alpha_loss\":"))
+    };
+    let mut lines: Vec<String> = text
+        .lines()
+        .enumerate()
+        .filter(|&(i, _)| !is_new(i))
+        .map(|(_, l)| l.to_owned())
+        .collect();
+    assert_eq!(lines.len(), all.len() - 4, "four norms are written");
+    for i in 1..lines.len() {
+        if lines[i].trim_start().starts_with('}') {
+            if let Some(kept) = lines[i - 1].strip_suffix(',') {
+                lines[i - 1] = kept.to_owned();
+            }
+        }
+    }
+    let older = lines.join("\n").into_bytes();
+    fs::write(&file, &older).unwrap();
+    let mut manifest = read_manifest(&saved.path);
+    let entry = manifest
+        .files
+        .iter_mut()
+        .find(|f| f.name == "state.json")
+        .unwrap();
+    entry.checksum = format!("{:016x}", checksum(&older));
+    entry.bytes = older.len() as u64;
+    fs::write(
+        saved.path.join(MANIFEST),
+        serde_json::to_vec(&manifest).unwrap(),
+    )
+    .unwrap();
+
+    let (restored, _) = Learner::restore_checkpoint(&config(), DIMS, &saved.path).unwrap();
+    let norms = [
+        "charts/low_actor_grad_norm",
+        "charts/high_actor_grad_norm",
+        "si/high_grad_norm",
+        "si/low_grad_norm",
+    ];
+    type Metrics = Vec<(&'static str, f64)>;
+    let split = |l: &Learner| -> (Metrics, Metrics) {
+        l.metrics()
+            .into_iter()
+            .filter(|(n, _)| !n.contains("per_sec"))
+            .partition(|(n, _)| norms.contains(n))
+    };
+    let (restored_norms, restored_rest) = split(&restored);
+    let (original_norms, original_rest) = split(&original);
+    assert_eq!(restored_norms.len(), 4);
+    assert!(
+        restored_norms.iter().all(|(_, v)| *v == 0.0),
+        "{restored_norms:?}"
+    );
+    assert!(
+        original_norms.iter().any(|(_, v)| *v > 0.0),
+        "{original_norms:?}"
+    );
+    assert_eq!(
+        restored_rest, original_rest,
+        "the other statistics come back"
+    );
 }

@@ -43,6 +43,10 @@ fn training_on_ingested_episodes_gives_finite_losses_and_metrics() {
         (40.0, 20.0)
     );
     assert!(get("losses/low_critic") > 0.0 && get("losses/high_critic") > 0.0);
+    assert!(
+        get("charts/low_actor_grad_norm") > 0.0 && get("charts/high_actor_grad_norm") > 0.0,
+        "both SAC actor steps had a gradient"
+    );
 }
 
 #[test]

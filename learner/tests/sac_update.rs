@@ -1,5 +1,6 @@
-//! The SAC update itself: Polyak averaging of the target critic, the online/target start, and a
-//! small learning sanity check (a one-step contextual bandit).
+//! The SAC update itself: Polyak averaging of the target critic, the online/target start, the
+//! reported actor gradient norm, and a small learning sanity check (a one-step contextual
+//! bandit).
 
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
@@ -135,4 +136,54 @@ fn auto_alpha_moves_the_temperature() {
         assert!(stats.alpha_loss.is_finite());
     }
     assert_ne!(level.alpha().unwrap(), start);
+}
+
+/// Σ g² over `prefix`'s variables of `vm` in `grads` (f64).
+fn sum_sq(grads: &candle_core::backprop::GradStore, vm: &VarMap, prefix: &str) -> f64 {
+    vars_under(vm, prefix)
+        .iter()
+        .filter_map(|v| grads.get(v.as_tensor()))
+        .flat_map(|g| g.flatten_all().unwrap().to_vec1::<f32>().unwrap())
+        .map(|g| f64::from(g) * f64::from(g))
+        .sum()
+}
+
+#[test]
+fn the_actor_grad_norm_is_the_norm_of_the_actor_loss_gradient_over_the_policy_only() {
+    let (mut level, vm, _tvm) = level(PARAMS);
+    let mut rng = Pcg64Mcg::seed_from_u64(6);
+    // A first update, so that the critic the actor step meets is not the initial one.
+    let (batch, e1, e2) = bandit_batch(&mut rng, 16);
+    level.update(&batch, &e1, &e2).unwrap();
+    let policy_before = values(&vm, "policy");
+    let (batch, next_eps, eps) = bandit_batch(&mut rng, 16);
+    let stats = level.update(&batch, &next_eps, &eps).unwrap();
+
+    // L_π by hand, with the policy as the actor step found it (put back here) and the online
+    // critic as it is now (the actor, temperature and Polyak steps leave it alone).
+    for (var, before) in vars_under(&vm, "policy").iter().zip(&policy_before) {
+        let t = Tensor::from_slice(before, var.shape(), &Device::Cpu).unwrap();
+        var.set(&t).unwrap();
+    }
+    let (action, log_prob) = level.policy().sample(&batch.head, &eps).unwrap();
+    let q_in = Tensor::cat(&[&batch.head, &action], 1).unwrap();
+    let min_q = level.critic().min_q(&q_in).unwrap();
+    let loss = (log_prob.affine(PARAMS.alpha, 0.0).unwrap() - min_q)
+        .unwrap()
+        .mean_all()
+        .unwrap();
+    let loss_value = f64::from(loss.to_scalar::<f32>().unwrap());
+    assert!((loss_value - stats.actor.loss).abs() <= 1e-6 * (1.0 + loss_value.abs()));
+    let grads = loss.backward().unwrap();
+    let policy_sq = sum_sq(&grads, &vm, "policy");
+    let want = policy_sq.sqrt();
+    let got = stats.actor_grad_norm;
+    assert!(want > 0.0);
+    assert!(
+        (got - want).abs() <= 1e-5 * want,
+        "reported {got}, by hand {want}"
+    );
+    // The critic's variables have a gradient too, which the norm leaves out.
+    let with_critic = (policy_sq + sum_sq(&grads, &vm, "critic")).sqrt();
+    assert!(with_critic > want * (1.0 + 1e-3), "{with_critic} vs {want}");
 }

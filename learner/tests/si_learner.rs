@@ -104,6 +104,11 @@ fn rounds_fall_due_after_the_start_episode_and_train_both_policies_once_each() {
         "β = 0.001"
     );
     assert_eq!((s.usable_fraction, s.low_usable_fraction), (1.0, 1.0));
+    let metrics = l.metrics();
+    let get = |name| metrics.iter().find(|(n, _)| *n == name).unwrap().1;
+    assert!(s.high_grad_norm > 0.0 && s.low_grad_norm > 0.0);
+    assert_eq!(get("si/high_grad_norm"), s.high_grad_norm);
+    assert_eq!(get("si/low_grad_norm"), s.low_grad_norm);
     // Four requests (two rounds × two levels), each a batch of 8 in the learner's φ version.
     assert_eq!(routes.asked.len(), 4);
     // The queries' points are φ under the learner's encoder (taken before the round: SI leaves

@@ -285,15 +285,15 @@ impl DeterministicLevel {
 
     /// One Adam step of the actor's optimiser on an extra policy loss (self-imitation), not
     /// clipped (the code's SI step is a plain optimiser step); `value` is checked finite first.
+    /// Returns the global L2 norm of `loss`'s gradient over the actor's variables.
     pub fn policy_step(
         &mut self,
         loss: &Tensor,
         what: &'static str,
         value: f64,
-    ) -> Result<(), LearnerError> {
+    ) -> Result<f64, LearnerError> {
         check_finite(what, value)?;
-        self.actor_opt.backward_step(loss)?;
-        Ok(())
+        Ok(self.actor_opt.backward_step_norm(loss)?)
     }
 
     /// The optimisers by name, `actor` and `critic` (checkpoints).

@@ -744,6 +744,12 @@ struct TelemetrySaved {
     si_usable_fraction: f64,
     si_low_usable_fraction: f64,
     si_via_frontier_fraction: f64,
+    /// Absent (0) in checkpoints of builds before the SI gradient norms.
+    #[serde(default)]
+    si_high_grad_norm: f64,
+    /// Likewise.
+    #[serde(default)]
+    si_low_grad_norm: f64,
 }
 
 impl TelemetrySaved {
@@ -766,6 +772,8 @@ impl TelemetrySaved {
             si_usable_fraction: si.usable_fraction,
             si_low_usable_fraction: si.low_usable_fraction,
             si_via_frontier_fraction: si.via_frontier_fraction,
+            si_high_grad_norm: si.high_grad_norm,
+            si_low_grad_norm: si.low_grad_norm,
         };
         // Left out (`"telemetry": null` in the file) rather than written as an unreadable file.
         let finite = serde_json::to_value(&saved).is_ok_and(|v| !has_null(&v));
@@ -789,6 +797,8 @@ impl TelemetrySaved {
         si.usable_fraction = self.si_usable_fraction;
         si.low_usable_fraction = self.si_low_usable_fraction;
         si.via_frontier_fraction = self.si_via_frontier_fraction;
+        si.high_grad_norm = self.si_high_grad_norm;
+        si.low_grad_norm = self.si_low_grad_norm;
     }
 }
 

@@ -123,6 +123,10 @@ pub struct SacStats {
     pub alpha: f64,
     /// L_α (0 when α is fixed).
     pub alpha_loss: f64,
+    /// ‖∇L_π‖₂: global L2 norm of the actor loss gradient over this level's policy variables,
+    /// as the policy's Adam step saw it (absent, 0, in checkpoints of older builds).
+    #[serde(default)]
+    pub actor_grad_norm: f64,
 }
 
 /// α, fixed or tuned.
@@ -258,7 +262,7 @@ impl SacLevel {
         let alpha = self.temperature.alpha()?;
         let target = self.target(batch, next_eps, alpha)?;
         let critic = self.critic_step(batch, &target)?;
-        let (actor, log_prob) = self.actor_step(batch, eps, alpha)?;
+        let (actor, actor_grad_norm, log_prob) = self.actor_step(batch, eps, alpha)?;
         let alpha_loss = self.temperature.step(&log_prob)?;
         self.polyak()?;
         Ok(SacStats {
@@ -266,6 +270,7 @@ impl SacLevel {
             actor,
             alpha,
             alpha_loss,
+            actor_grad_norm,
         })
     }
 
@@ -322,13 +327,14 @@ impl SacLevel {
         Ok(stats)
     }
 
-    /// One Adam step on L_π against the updated critic; returns log π(ã|s) for the temperature.
+    /// One Adam step on L_π against the updated critic; returns the gradient's norm over the
+    /// policy variables and log π(ã|s) for the temperature.
     fn actor_step(
         &mut self,
         batch: &SacBatch,
         eps: &Tensor,
         alpha: f64,
-    ) -> Result<(ActorStats, Tensor), LearnerError> {
+    ) -> Result<(ActorStats, f64, Tensor), LearnerError> {
         let (action, log_prob) = self
             .nets
             .policy
@@ -340,21 +346,22 @@ impl SacLevel {
         )?)?;
         let (loss, stats) = actor_loss(&log_prob, &min_q, alpha)?;
         self.check_finite("actor loss", stats.loss)?;
-        self.policy_opt.backward_step(&loss)?;
-        Ok((stats, log_prob.detach()))
+        // The critic's variables get a gradient too; the norm counts only the policy's.
+        let grad_norm = self.policy_opt.backward_step_norm(&loss)?;
+        Ok((stats, grad_norm, log_prob.detach()))
     }
 
     /// One Adam step of the policy optimiser on an extra policy loss (self-imitation,
     /// [`crate::si`]); `value` is the loss as a number, checked to be finite before stepping.
+    /// Returns the global L2 norm of `loss`'s gradient over the policy variables.
     pub fn policy_step(
         &mut self,
         loss: &Tensor,
         what: &'static str,
         value: f64,
-    ) -> Result<(), LearnerError> {
+    ) -> Result<f64, LearnerError> {
         self.check_finite(what, value)?;
-        self.policy_opt.backward_step(loss)?;
-        Ok(())
+        Ok(self.policy_opt.backward_step_norm(loss)?)
     }
 
     /// target ← τ·online + (1 − τ)·target.

@@ -94,6 +94,11 @@ pub struct SiStats {
     pub high: SiLossStats,
     /// Latest low-level loss.
     pub low: SiLossStats,
+    /// Latest high step: global L2 norm of the weighted loss's (α·L) gradient over the high
+    /// policy's variables, as its Adam step saw it.
+    pub high_grad_norm: f64,
+    /// Latest low step: the same for β·L over the low policy's variables.
+    pub low_grad_norm: f64,
     /// Latest high batch: fraction of sampled entries with a usable route (`L > 1`).
     pub usable_fraction: f64,
     /// Latest low batch: fraction of sampled entries with a usable route (`L > 2`).
@@ -475,8 +480,9 @@ impl SelfImitation {
         if !finite_with_gradient(&loss, stats.loss, nets)? {
             return Ok(Err(SiSkip::NonFinite));
         }
-        nets.high
-            .policy_step(&loss, "self-imitation loss", stats.loss)?;
+        self.stats.high_grad_norm =
+            nets.high
+                .policy_step(&loss, "self-imitation loss", stats.loss)?;
         self.stats.high = stats;
         self.stats.high_steps += 1;
         Ok(Ok(()))
@@ -511,8 +517,9 @@ impl SelfImitation {
         if !finite_with_gradient(&loss, stats.loss, nets)? {
             return Ok(Err(SiSkip::NonFinite));
         }
-        nets.low
-            .policy_step(&loss, "self-imitation loss", stats.loss)?;
+        self.stats.low_grad_norm =
+            nets.low
+                .policy_step(&loss, "self-imitation loss", stats.loss)?;
         self.stats.low = stats;
         self.stats.low_steps += 1;
         Ok(Ok(()))
@@ -560,3 +567,6 @@ fn queries(sampled: &Sampled) -> Vec<RouteQuery> {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests;
