@@ -15,8 +15,9 @@
 mod common;
 
 use std::collections::BTreeMap;
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus, Stdio};
+use std::process::ExitStatus;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -38,22 +39,19 @@ const CHECKPOINT: &str = "checkpoints/ckpt-000001";
 fn folder_with_checkpoints(test: &str) -> PathBuf {
     let dir = fresh_dir(test);
     std::fs::create_dir_all(&dir).unwrap();
-    let log = std::fs::File::create(dir.join("setup.log")).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_asi"))
-        .args(["train", "--serial", "--config", SMOKE, "--run-dir"])
-        .arg(&dir)
-        .args([
-            "--set",
-            "run.name=startup-setup",
-            "--set",
-            "run.max_episodes=2",
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdin(Stdio::null())
-        .stdout(log.try_clone().unwrap())
-        .stderr(log)
-        .spawn()
-        .expect("asi starts");
+    let args = [
+        OsStr::new("train"),
+        OsStr::new("--serial"),
+        OsStr::new("--config"),
+        OsStr::new(SMOKE),
+        OsStr::new("--run-dir"),
+        dir.as_os_str(),
+        OsStr::new("--set"),
+        OsStr::new("run.name=startup-setup"),
+        OsStr::new("--set"),
+        OsStr::new("run.max_episodes=2"),
+    ];
+    let mut child = spawn_asi(args, &dir.join("setup.log"));
     let deadline = Instant::now() + STARTUP_WATCHDOG;
     let status = loop {
         if let Some(status) = child.try_wait().unwrap() {

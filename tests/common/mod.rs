@@ -5,6 +5,7 @@
 
 #![allow(dead_code)] // each test binary uses its own subset
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -48,15 +49,7 @@ impl Run {
             &name,
         ];
         args.extend(extra);
-        let log = std::fs::File::create(launcher_log(&dir)).unwrap();
-        let child = Command::new(env!("CARGO_BIN_EXE_asi"))
-            .args(&args)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .stdin(Stdio::null())
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .expect("asi starts");
+        let child = spawn_asi(&args, &launcher_log(&dir));
         Run {
             dir,
             child,
@@ -173,6 +166,20 @@ impl Drop for Run {
         let _ = std::fs::remove_dir_all(&self.dir);
         let _ = std::fs::remove_file(launcher_log(&self.dir));
     }
+}
+
+/// Starts the `asi` binary with `args` in the package folder (where `configs/` lies), stdin
+/// closed, stdout and stderr both written to a new file at `log`.
+pub fn spawn_asi<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>, log: &Path) -> Child {
+    let log = std::fs::File::create(log).unwrap_or_else(|e| panic!("{}: {e}", log.display()));
+    Command::new(env!("CARGO_BIN_EXE_asi"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdin(Stdio::null())
+        .stdout(log.try_clone().unwrap())
+        .stderr(log)
+        .spawn()
+        .expect("asi starts")
 }
 
 /// A unique run folder path for `test` under the temp folder (not created).
