@@ -1,7 +1,8 @@
 //! Resume system tests: the real `asi` binary on `configs/smoke.toml`, each run in its own
 //! folder with its own run id and a watchdog. A stopped run started again in the same folder
-//! resumes from its checkpoint (counters continue, nothing restarts from 0); a checkpoint of
-//! another config is refused before anything starts.
+//! resumes from its checkpoint (counters continue, nothing restarts from 0); a damaged
+//! graph-service checkpoint is refused and kept while the run resumes; a checkpoint of another
+//! config is refused before anything starts.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -236,6 +237,125 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     assert!(graph_after["refused_checkpoints"]
         .as_array()
         .is_some_and(Vec::is_empty));
+}
+
+/// Every file of a checkpoint folder, by name, with its bytes.
+fn files_of(folder: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(folder)
+        .unwrap_or_else(|e| panic!("{}: {e}", folder.display()))
+        .flatten()
+        .map(|e| {
+            let bytes = std::fs::read(e.path()).unwrap();
+            (e.file_name().to_string_lossy().into_owned(), bytes)
+        })
+        .collect()
+}
+
+#[test]
+fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_an_empty_store() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = RunDir::new("corrupt-graph");
+    // Checkpoints only at the clean stops (the interval is not part of the config fingerprint),
+    // so the first launch leaves exactly one graph-service checkpoint however slow the machine,
+    // and the second launch cannot prune the damaged one with interval checkpoints.
+    let no_interval = "run.checkpoint_interval_mins=600";
+    let first = train(&dir, &["--set", "run.max_episodes=6", "--set", no_interval]);
+    assert!(
+        first.status.success(),
+        "first launch: {}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
+    let graph_dir = dir.0.join("checkpoints/graph-service");
+    let graph_ckpts = || {
+        let mut names: Vec<String> = std::fs::read_dir(&graph_dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(
+        graph_ckpts(),
+        ["ckpt-000001"],
+        "one graph-service checkpoint"
+    );
+    let graph_before = dir.status("graph-service");
+    assert!(as_u64(&graph_before, "stored_steps") > 0, "{graph_before}");
+    let before = dir.status("learner");
+    let (steps, updates) = (as_u64(&before, "env_steps"), as_u64(&before, "updates_low"));
+    assert!(steps > 0 && updates > 0, "{before}");
+    let lines_before = env_steps_per_line(&dir.0).len();
+
+    // Flip one byte in the middle of the store (the manifest keeps its checksum).
+    let damaged = graph_dir.join("ckpt-000001");
+    let store = damaged.join("store.safetensors");
+    let mut bytes = std::fs::read(&store).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0xff;
+    std::fs::write(&store, &bytes).unwrap();
+    let damaged_files = files_of(&damaged);
+
+    let episodes = as_u64(&before, "episodes");
+    let budget = format!("run.max_episodes={}", episodes + 6);
+    let second = train(&dir, &["--set", &budget, "--set", no_interval]);
+    assert!(
+        second.status.success(),
+        "second launch: {}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    // The learner resumed from its own checkpoint and trained on.
+    let stdout = String::from_utf8_lossy(&second.stdout);
+    assert!(
+        stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
+        "{stdout}"
+    );
+    let after = dir.status("learner");
+    assert!(
+        as_u64(&after, "env_steps") > steps,
+        "env steps continued: {before} → {after}"
+    );
+    assert!(
+        as_u64(&after, "updates_low") > updates,
+        "updates continued: {before} → {after}"
+    );
+    let lines = env_steps_per_line(&dir.0);
+    assert!(
+        lines.len() > lines_before,
+        "the second launch appended metrics"
+    );
+    assert!(
+        lines[lines_before..].iter().all(|&s| s >= steps),
+        "{lines:?}"
+    );
+    // The graph-service refused its only checkpoint, naming the file, and started empty.
+    let graph_after = dir.status("graph-service");
+    assert!(graph_after["restored_from"].is_null(), "{graph_after}");
+    assert_eq!(
+        as_u64(&graph_after, "restored_stored_steps"),
+        0,
+        "{graph_after}"
+    );
+    let refused = graph_after["refused_checkpoints"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{graph_after}"));
+    assert_eq!(refused.len(), 1, "{graph_after}");
+    let reason = refused[0].as_str().unwrap();
+    assert!(
+        reason.starts_with(&format!("{}: ", damaged.display()))
+            && reason.contains(&store.display().to_string())
+            && reason.contains("checksum"),
+        "{reason}"
+    );
+    // It filled a new store from the new chunks and checkpointed it beside the damaged one,
+    // which is left as it was.
+    assert!(as_u64(&graph_after, "stored_steps") > 0, "{graph_after}");
+    assert_eq!(graph_ckpts(), ["ckpt-000001", "ckpt-000002"]);
+    assert!(
+        files_of(&damaged) == damaged_files,
+        "the refused checkpoint is kept unchanged"
+    );
 }
 
 #[test]
