@@ -152,6 +152,38 @@ fn stored_steps_per_line(dir: &Path) -> Vec<u64> {
         .collect()
 }
 
+/// Launches `dir`'s run again with 6 episodes more than the learner status `before` (taken at
+/// the first launch's stop) and `extra` arguments; checks that it succeeded, resumed from
+/// learner checkpoint 1 at `before`'s env steps, and trained on (env steps and low updates
+/// grew). Returns the learner status after it.
+fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
+    let (steps, updates) = (as_u64(before, "env_steps"), as_u64(before, "updates_low"));
+    let budget = format!("run.max_episodes={}", as_u64(before, "episodes") + 6);
+    let mut args = vec!["--set", budget.as_str()];
+    args.extend_from_slice(extra);
+    let second = train(dir, &args);
+    assert!(
+        second.status.success(),
+        "second launch: {}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&second.stdout);
+    assert!(
+        stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
+        "{stdout}"
+    );
+    let after = dir.status("learner");
+    assert!(
+        as_u64(&after, "env_steps") > steps,
+        "env steps continued: {before} → {after}"
+    );
+    assert!(
+        as_u64(&after, "updates_low") > updates,
+        "updates continued: {before} → {after}"
+    );
+    after
+}
+
 #[test]
 fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
@@ -182,27 +214,7 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
 
     // The first launch overshoots its budget while it stops; give the second 6 more episodes.
     let episodes = as_u64(&before, "episodes");
-    let budget = format!("run.max_episodes={}", episodes + 6);
-    let second = train(&dir, &["--set", &budget]);
-    assert!(
-        second.status.success(),
-        "second launch: {}",
-        String::from_utf8_lossy(&second.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&second.stdout);
-    assert!(
-        stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
-        "{stdout}"
-    );
-    let after = dir.status("learner");
-    assert!(
-        as_u64(&after, "env_steps") > steps,
-        "env steps continued: {before} → {after}"
-    );
-    assert!(
-        as_u64(&after, "updates_low") > updates,
-        "updates continued: {before} → {after}"
-    );
+    let after = resume_six_more(&dir, &before, &[]);
     assert!(
         as_u64(&after, "episodes") >= episodes + 6,
         "the budget counts both launches: {after}"
@@ -297,29 +309,8 @@ fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_a
     std::fs::write(&store, &bytes).unwrap();
     let damaged_files = files_of(&damaged);
 
-    let episodes = as_u64(&before, "episodes");
-    let budget = format!("run.max_episodes={}", episodes + 6);
-    let second = train(&dir, &["--set", &budget, "--set", no_interval]);
-    assert!(
-        second.status.success(),
-        "second launch: {}",
-        String::from_utf8_lossy(&second.stderr)
-    );
     // The learner resumed from its own checkpoint and trained on.
-    let stdout = String::from_utf8_lossy(&second.stdout);
-    assert!(
-        stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
-        "{stdout}"
-    );
-    let after = dir.status("learner");
-    assert!(
-        as_u64(&after, "env_steps") > steps,
-        "env steps continued: {before} → {after}"
-    );
-    assert!(
-        as_u64(&after, "updates_low") > updates,
-        "updates continued: {before} → {after}"
-    );
+    resume_six_more(&dir, &before, &["--set", no_interval]);
     let lines = env_steps_per_line(&dir.0);
     assert!(
         lines.len() > lines_before,
