@@ -8,6 +8,10 @@
 //! Checkpoints: the learner writes them to `run_dir/checkpoints/` ([`CHECKPOINT_DIR`]) every
 //! `run.checkpoint_interval_mins` and at a clean stop ([`CheckpointTimer`]), and starts from the
 //! newest one when there is one ([`open_learner`]); see `learner::learner::checkpoint`.
+//!
+//! One launch per folder: the launcher holds an exclusive lock on `run_dir/run.lock`
+//! ([`RunLock`]) for as long as it runs, so a second `asi train` on the same folder stops with
+//! an error instead of writing into the first one's files.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -24,6 +28,8 @@ pub const RUN_ID_FILE: &str = "run_id";
 pub const STATUS_DIR: &str = "status";
 /// Folder in the run folder holding the learner's checkpoints (`ckpt-NNNNNN/`, newest two).
 pub const CHECKPOINT_DIR: &str = "checkpoints";
+/// File in the run folder the launcher locks ([`RunLock`]); it holds the launcher's pid.
+pub const LOCK_FILE: &str = "run.lock";
 
 #[derive(Debug, Clone)]
 pub struct RunContext {
@@ -32,13 +38,21 @@ pub struct RunContext {
     pub run_id: RunId,
     /// Launcher side: this launch resumes from a checkpoint (outputs are appended to).
     pub resume: bool,
+    /// Launcher side: the folder's lock, held while any clone of the context lives.
+    pub(crate) _lock: Option<std::sync::Arc<RunLock>>,
 }
 
 impl RunContext {
     /// Launcher side: creates the run folder, writes the resolved config and a fresh run id,
     /// and clears the status files of an earlier launch in the same folder; `resume` says
-    /// whether this launch continues from a checkpoint.
-    pub fn create(config: Config, run_dir: PathBuf, resume: bool) -> anyhow::Result<Self> {
+    /// whether this launch continues from a checkpoint; `lock` is the folder's, held from
+    /// before the resume decision.
+    pub fn create(
+        config: Config,
+        run_dir: PathBuf,
+        resume: bool,
+        lock: RunLock,
+    ) -> anyhow::Result<Self> {
         let status = run_dir.join(STATUS_DIR);
         if status.exists() {
             std::fs::remove_dir_all(&status)
@@ -57,6 +71,7 @@ impl RunContext {
             run_dir,
             run_id,
             resume,
+            _lock: Some(std::sync::Arc::new(lock)),
         })
     }
 
@@ -78,6 +93,7 @@ impl RunContext {
             run_dir: run_dir.to_owned(),
             run_id: current,
             resume: false,
+            _lock: None,
         })
     }
 
@@ -120,6 +136,84 @@ impl RunContext {
             &serde_json::to_string_pretty(status)?,
         )
     }
+}
+
+/// An exclusive lock on a run folder's [`LOCK_FILE`], released when dropped (or when the
+/// process dies: the kernel drops it with the file descriptor).
+#[derive(Debug)]
+pub struct RunLock {
+    _file: std::fs::File,
+}
+
+impl RunLock {
+    /// Creates `run_dir` if needed and locks it; an error names the pid of the launch that
+    /// holds it.
+    pub fn acquire(run_dir: &Path) -> anyhow::Result<Self> {
+        use std::io::{Read, Seek, Write};
+        std::fs::create_dir_all(run_dir)
+            .with_context(|| format!("creating run folder {}", run_dir.display()))?;
+        let path = run_dir.join(LOCK_FILE);
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .with_context(|| format!("opening {}", path.display()))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let mut holder = String::new();
+                let _ = file.read_to_string(&mut holder);
+                bail!(
+                    "run folder {} is in use by another `asi train` (pid {}, in {}); stop that \
+                     run first, or choose another --run-dir",
+                    run_dir.display(),
+                    holder.trim(),
+                    path.display()
+                );
+            }
+            Err(std::fs::TryLockError::Error(err)) => {
+                return Err(err).with_context(|| format!("locking {}", path.display()))
+            }
+        }
+        file.set_len(0)
+            .and_then(|()| file.rewind())
+            .and_then(|()| writeln!(file, "{}", std::process::id()))
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(Self { _file: file })
+    }
+}
+
+/// What an earlier launch left in `run_dir` besides the files every launch rewrites (resolved
+/// config, run id, status, lock): the names of non-empty files and folders, sorted. Empty when
+/// the folder does not exist.
+pub fn earlier_outputs(run_dir: &Path) -> anyhow::Result<Vec<String>> {
+    let entries = match std::fs::read_dir(run_dir) {
+        Ok(entries) => entries,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(err) => return Err(err).with_context(|| format!("reading {}", run_dir.display())),
+    };
+    let rewritten = [RESOLVED_CONFIG_FILE, RUN_ID_FILE, STATUS_DIR, LOCK_FILE];
+    let mut found = Vec::new();
+    for entry in entries {
+        let entry = entry.with_context(|| format!("reading {}", run_dir.display()))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if rewritten.contains(&name.as_str()) {
+            continue;
+        }
+        let path = entry.path();
+        let non_empty = if path.is_dir() {
+            std::fs::read_dir(&path).is_ok_and(|mut d| d.next().is_some())
+        } else {
+            entry.metadata().is_ok_and(|m| m.len() > 0)
+        };
+        if non_empty {
+            found.push(name);
+        }
+    }
+    found.sort();
+    Ok(found)
 }
 
 /// Reads the run id stored in a run folder.
@@ -257,5 +351,58 @@ fn save_checkpoint(ctx: &RunContext, learner: &Learner) -> anyhow::Result<Option
         }
         Err(CheckpointError::RoundActive) => Ok(None),
         Err(err) => Err(err).context("writing a checkpoint"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_dir(test: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("asi-run-{test}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        dir
+    }
+
+    #[test]
+    fn a_locked_run_folder_refuses_a_second_lock_naming_the_holder_until_the_first_is_dropped() {
+        let dir = temp_dir("lock");
+        let first = RunLock::acquire(&dir).unwrap();
+        let pid = std::process::id().to_string();
+        assert_eq!(
+            std::fs::read_to_string(dir.join(LOCK_FILE)).unwrap().trim(),
+            pid
+        );
+        // flock locks belong to the open file, so a second open in this process conflicts too.
+        let err = RunLock::acquire(&dir).unwrap_err().to_string();
+        assert!(err.contains("in use by another `asi train`"), "{err}");
+        assert!(err.contains(&format!("pid {pid}")), "{err}");
+        drop(first);
+        let _again = RunLock::acquire(&dir).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn earlier_outputs_are_the_non_empty_entries_besides_the_files_every_launch_rewrites() {
+        let dir = temp_dir("outputs");
+        assert!(earlier_outputs(&dir).unwrap().is_empty(), "no folder");
+        std::fs::create_dir_all(dir.join(STATUS_DIR)).unwrap();
+        std::fs::write(dir.join(STATUS_DIR).join("learner.json"), "{}").unwrap();
+        std::fs::write(dir.join(RESOLVED_CONFIG_FILE), "[run]").unwrap();
+        std::fs::write(dir.join(RUN_ID_FILE), "r-1").unwrap();
+        std::fs::write(dir.join(LOCK_FILE), "1").unwrap();
+        std::fs::write(dir.join("metrics.jsonl"), "").unwrap();
+        std::fs::create_dir_all(dir.join("plots")).unwrap();
+        assert!(
+            earlier_outputs(&dir).unwrap().is_empty(),
+            "only rewritten files, an empty file and an empty folder"
+        );
+        std::fs::write(dir.join("metrics.jsonl"), "{}\n").unwrap();
+        std::fs::create_dir_all(dir.join("checkpoints/graph-service")).unwrap();
+        assert_eq!(
+            earlier_outputs(&dir).unwrap(),
+            ["checkpoints", "metrics.jsonl"]
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

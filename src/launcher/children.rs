@@ -399,6 +399,7 @@ mod tests {
             run_dir: dir.clone(),
             run_id: protocol::RunId::new("t-1").unwrap(),
             resume: false,
+            _lock: None,
         };
         (Children::new(&ctx).unwrap(), dir)
     }

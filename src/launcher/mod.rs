@@ -25,7 +25,7 @@ use protocol::{ControlCommand, ControlMessage};
 
 use crate::channels::Channels;
 use crate::proc::common::{node, task_info};
-use crate::run::RunContext;
+use crate::run::{RunContext, RunLock};
 use children::{ChildKind, Children};
 use metrics::MetricsBook;
 
@@ -245,12 +245,15 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
             None => "loading the default config (AntMaze-U)".to_owned(),
         })?;
     let run_dir = args.run_dir.clone().unwrap_or_else(|| config.run.run_dir());
+    // Locked before anything in it is read or moved: a running launch keeps its folder.
+    let mut lock = RunLock::acquire(&run_dir)?;
     if args.restart {
         if let Some(old) = move_aside(&run_dir)? {
             println!(
                 "restarting: the previous run folder was moved to {}",
                 old.display()
             );
+            lock = RunLock::acquire(&run_dir)?;
         }
     }
     let resume = match resume_point(&config, &run_dir)? {
@@ -261,9 +264,30 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
             );
             true
         }
-        None => false,
+        None => {
+            refuse_outputs_without_checkpoint(&run_dir)?;
+            false
+        }
     };
-    RunContext::create(config, run_dir, resume)
+    RunContext::create(config, run_dir, resume, lock)
+}
+
+/// A folder with an earlier run's outputs but no learner checkpoint (that run stopped before
+/// its first one) is not started over in place: that would truncate its metrics and mix a
+/// new learner with the graph-service checkpoint it may have left. Nothing is changed.
+fn refuse_outputs_without_checkpoint(run_dir: &std::path::Path) -> anyhow::Result<()> {
+    let outputs = crate::run::earlier_outputs(run_dir)?;
+    if outputs.is_empty() {
+        return Ok(());
+    }
+    bail!(
+        "run folder {} holds an earlier run's outputs ({}) but no learner checkpoint to resume \
+         from (that run stopped before its first checkpoint, written every \
+         run.checkpoint_interval_mins); nothing was changed. Start over with --restart (the old \
+         folder is moved aside, nothing is deleted), or choose another --run-dir",
+        run_dir.display(),
+        outputs.join(", ")
+    )
 }
 
 /// The manifest of the checkpoint a launch in `run_dir` resumes from, checked against this
@@ -310,7 +334,10 @@ fn resume_point(
 /// (nothing is deleted) and returns the new name; `None` when there was nothing to move.
 pub fn move_aside(run_dir: &std::path::Path) -> anyhow::Result<Option<std::path::PathBuf>> {
     let empty = match std::fs::read_dir(run_dir) {
-        Ok(mut entries) => entries.next().is_none(),
+        // The lock file alone is this launch's own (see `prepare`).
+        Ok(entries) => entries
+            .flatten()
+            .all(|e| e.file_name() == crate::run::LOCK_FILE),
         Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(err) => return Err(err).with_context(|| format!("reading {}", run_dir.display())),
     };
