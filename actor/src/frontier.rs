@@ -7,7 +7,9 @@
 //!   answer → a normal episode ([`Assignment::NoRoute`], counted by the actor).
 //! - **Each decision** of an FR episode ([`FrontierEpisode::decide`]), in the reference order:
 //!   1. switch tests on ag = φ(s_t): within ε (`asi.frontier_epsilon`, strict `<`) of g_F →
-//!      count mode for the rest of the episode ([`Switch::NearFrontier`]); otherwise, when the
+//!      count mode for the rest of the episode ([`Switch::NearFrontier`]; with
+//!      `asi.near_frontier = "end_fr"`, an experiment, for this decision only, then FR mode
+//!      ends as after a stuck switch); otherwise, when the
 //!      two previous FR decision points are both closer than `asi.stuck_threshold` to ag →
 //!      count mode for this decision and FR mode ends ([`Switch::Stuck`]): later decisions
 //!      use the normal HESS/policy sources (digest §7 item 1);
@@ -25,7 +27,7 @@
 //! route and g_F are points of the φ-space the episode started in (the actor ends FR mode when
 //! a new φ arrives mid-episode, as those points would no longer mean anything).
 
-use protocol::config::CountModeScore;
+use protocol::config::{CountModeScore, NearFrontier};
 use protocol::graph::FrontierRoute;
 use protocol::{Config, DecisionKind, LatentPoint, PhiVersion};
 use rand::Rng;
@@ -48,6 +50,9 @@ pub struct FrontierParams {
     pub n_candidates: usize,
     /// Half-width of the candidate box (`hierarchy.abs_range`; φ units).
     pub abs_range: f32,
+    /// FR mode ends after the near-frontier switch (`asi.near_frontier = "end_fr"`); false:
+    /// count mode for the rest of the episode.
+    pub end_at_frontier: bool,
 }
 
 impl FrontierParams {
@@ -72,6 +77,7 @@ impl FrontierParams {
             stuck_threshold: asi.stuck_threshold as f32,
             n_candidates: asi.count_mode_candidates,
             abs_range: config.hierarchy.abs_range as f32,
+            end_at_frontier: asi.near_frontier == NearFrontier::EndFr,
         }))
     }
 }
@@ -356,6 +362,9 @@ impl FrontierEpisode {
         if distance(&self.frontier, &at) < params.epsilon {
             let first = !self.count_mode;
             self.count_mode = true;
+            if params.end_at_frontier {
+                self.active = false;
+            }
             first.then_some(Switch::NearFrontier)
         } else if close(self.prev) && close(self.prev2) {
             self.count_mode = true;

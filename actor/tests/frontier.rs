@@ -130,6 +130,7 @@ fn params() -> FrontierParams {
         stuck_threshold: 1.0,
         n_candidates: 100,
         abs_range: 10.0,
+        end_at_frontier: false,
     }
 }
 
@@ -246,6 +247,31 @@ fn within_epsilon_of_the_frontier_count_mode_starts_and_stays() {
         (None, DecisionKind::FrontierCount)
     );
     assert!(fr.is_active());
+}
+
+#[test]
+fn with_near_frontier_end_fr_the_switching_decision_is_count_mode_and_fr_mode_ends() {
+    let mut fr = FrontierEpisode::new(found(x_route(), [18.0, 0.0]));
+    let mut rng = Pcg64Mcg::seed_from_u64(1);
+    let mut oracle = ScriptedOracle::new(no_route);
+    let p = FrontierParams {
+        end_at_frontier: true,
+        ..params()
+    };
+    let far = fr
+        .decide([10.0, 0.0], &p, PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(far.decision_kind(), DecisionKind::FrontierRoute);
+    assert!(fr.is_active());
+    let near = fr
+        .decide([18.0, 7.9], &p, PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(
+        (near.switch, near.decision_kind()),
+        (Some(Switch::NearFrontier), DecisionKind::FrontierCount)
+    );
+    assert_eq!(oracle.candidates_asked.len(), 1);
+    assert!(!fr.is_active(), "later decisions leave FR mode");
 }
 
 #[test]
@@ -646,6 +672,27 @@ fn near_the_frontier_every_decision_is_the_least_visited_candidate() {
     );
     assert_eq!(end.xy, [decided[0].obs[0], decided[0].obs[1]]);
     assert_eq!(stats.n_navigating_at_end, 0);
+}
+
+#[test]
+fn with_near_frontier_end_fr_an_episode_at_its_frontier_decides_once_in_count_mode_then_normally() {
+    let mut config = config();
+    config.asi.stuck_threshold = 0.0;
+    config.asi.near_frontier = protocol::config::NearFrontier::EndFr;
+    let mut actor = actor(&config, 9, 1.0);
+    let mut oracle = ScriptedOracle::new(frontier_here);
+    let decided = decisions(&episode(&mut actor, &mut oracle));
+    let mut expected = vec![DecisionKind::FrontierCount];
+    expected.extend([DecisionKind::Random; 9]); // the actor's first episode is a random one
+    assert_eq!(kinds(&decided), expected);
+    assert_eq!(oracle.candidates_asked.len(), 1);
+    let stats = actor.stats().frontier;
+    assert_eq!(
+        (stats.n_near_frontier_switches, stats.n_count_decisions),
+        (1, 1)
+    );
+    let end = actor.stats().last_fr_end.expect("an FR episode finished");
+    assert_eq!(end.outcome, FrOutcome::NearFrontier);
 }
 
 #[test]

@@ -352,6 +352,12 @@ pub struct AsiConfig {
     /// `"future_count"` (code: the HESS future-count hash; refused by the config check while
     /// `frontier_reaching` is on, as the graph-service does not score it yet).
     pub count_mode_score: CountModeScore,
+    /// What an FR episode does once φ(s_t) is within ε of the frontier: `"count_mode"`
+    /// (default; paper and code: count mode for the rest of the episode) or `"end_fr"` (an
+    /// experiment, not in the paper: that decision is still count mode, then FR mode ends as
+    /// after a stuck switch and later decisions come from the episode's normal sources — HESS
+    /// exploration subgoals drawn from stored states, or the policy).
+    pub near_frontier: NearFrontier,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
     /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code.
@@ -381,6 +387,17 @@ pub enum CountModeScore {
     FutureCount,
 }
 
+/// What an FR episode does near its frontier (`asi.near_frontier`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NearFrontier {
+    /// Count mode for the rest of the episode (paper and code). Default.
+    #[default]
+    CountMode,
+    /// End FR mode after the switching decision; the normal sources decide from then on.
+    EndFr,
+}
+
 impl Default for AsiConfig {
     fn default() -> Self {
         Self {
@@ -407,6 +424,7 @@ impl Default for AsiConfig {
             stuck_threshold: 1.0,
             count_mode_candidates: 100,
             count_mode_score: CountModeScore::GraphVisits,
+            near_frontier: NearFrontier::CountMode,
             si_start_episode: 300,
             si_alpha: 0.01,
             si_beta: 0.001,
