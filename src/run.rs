@@ -323,14 +323,43 @@ impl CheckpointTimer {
 }
 
 /// A checkpoint at a clean stop: a running φ round is first run to its end (its state is not
-/// saved), then the checkpoint is written.
-pub fn final_checkpoint(ctx: &RunContext, learner: &mut Learner) -> anyhow::Result<Checkpoint> {
+/// saved), then the checkpoint is written — unless the newest checkpoint on disk already holds
+/// this state (nothing ingested, no update since it was written or restored: a launch stopped
+/// before it trained, or a finished run launched again), which is logged and `None`: rewriting
+/// it would only push an older, different checkpoint out of the two kept.
+pub fn final_checkpoint(
+    ctx: &RunContext,
+    learner: &mut Learner,
+) -> anyhow::Result<Option<Checkpoint>> {
     while learner.phi_round_active() {
         learner
             .train(usize::MAX)
             .context("finishing the φ round before the final checkpoint")?;
     }
-    save_checkpoint(ctx, learner)?.context("a φ round is still running after it was finished")
+    if let Some(sequence) = unchanged_since_newest(ctx, learner) {
+        tracing::info!(
+            checkpoint = sequence,
+            "no final checkpoint: nothing was ingested or trained since checkpoint {sequence}"
+        );
+        return Ok(None);
+    }
+    save_checkpoint(ctx, learner)?
+        .context("a φ round is still running after it was finished")
+        .map(Some)
+}
+
+/// The sequence number of the newest checkpoint in the run folder when its counters (env steps
+/// ingested, low and high updates) equal the learner's; `None` otherwise or when there is none
+/// or it cannot be read (then a new one is written).
+fn unchanged_since_newest(ctx: &RunContext, learner: &Learner) -> Option<u64> {
+    let path = learner::learner::checkpoint::latest_checkpoint(&ctx.checkpoint_dir()).ok()??;
+    let manifest: learner::learner::checkpoint::Manifest =
+        ckpt::read_manifest(&path, learner::learner::checkpoint::MANIFEST).ok()?;
+    let now = learner.progress();
+    (manifest.env_steps == now.env_steps_ingested
+        && manifest.updates_low == now.updates_low
+        && manifest.updates_high == now.updates_high)
+        .then_some(manifest.sequence)
 }
 
 /// Writes a checkpoint and logs its size and write time; `None` when a φ round defers it.

@@ -286,14 +286,16 @@ impl Serial {
         }
         self.metrics.flush()?;
         self.eval.finish();
-        crate::run::final_checkpoint(&self.ctx, &mut self.learner)?;
-        if self.actors.iter().any(Actor::has_open_episode) {
-            tracing::warn!(
-                "the run ended with open episodes: they are not saved, and a resume continues \
-                 with new episodes (not bit-identical to an uninterrupted run)"
-            );
+        // Nothing new since the newest checkpoint: its serial part stays the one beside it.
+        if crate::run::final_checkpoint(&self.ctx, &mut self.learner)?.is_some() {
+            if self.actors.iter().any(Actor::has_open_episode) {
+                tracing::warn!(
+                    "the run ended with open episodes: they are not saved, and a resume \
+                     continues with new episodes (not bit-identical to an uninterrupted run)"
+                );
+            }
+            self.save().context("writing the final serial checkpoint")?;
         }
-        self.save().context("writing the final serial checkpoint")?;
         self.picture.draw_if_behind(&self.graph.service);
         crate::plot::redraw_run_curves(&self.picture.run_dir);
         let env_steps = self.learner.progress().env_steps_ingested;

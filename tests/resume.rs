@@ -382,6 +382,37 @@ fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_b
         "serial mode draws the success and coverage curves"
     );
 
+    // Launched again with nothing left to do: no checkpoint is rewritten (a re-save of the
+    // same state would push an older, different one out of the two kept).
+    let serial_ckpts = |dir: &RunDir| {
+        let mut names: Vec<String> = std::fs::read_dir(dir.0.join("checkpoints/serial"))
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    let serial_before = serial_ckpts(&dir);
+    let again = train(&dir, &["--serial", "--set", "run.max_episodes=4"]);
+    assert!(
+        again.status.success(),
+        "launch with nothing to do: {}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+    let log = String::from_utf8_lossy(&again.stderr);
+    assert!(
+        log.contains("no final checkpoint: nothing was ingested or trained since checkpoint 1"),
+        "{log}"
+    );
+    assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
+    assert_eq!(serial_ckpts(&dir), serial_before);
+    assert_eq!(
+        env_steps_per_line(&dir.0).len(),
+        first_lines,
+        "no metrics line added"
+    );
+
     let second = train(&dir, &["--serial", "--set", "run.max_episodes=8"]);
     assert!(
         second.status.success(),
