@@ -20,7 +20,10 @@
 #
 # Environment: ASI_BIN (default target/release/asi, built if missing), FR_START (200) and
 # SI_START (300) must equal the config's asi.fr_start_episode / asi.si_start_episode, JOBS (2)
-# arms run at once, NICE (19) their priority. Re-running resumes every unfinished stage.
+# arms run at once, NICE (19) their priority, CKPT_MINS (10) minutes between checkpoints
+# (run.checkpoint_interval_mins; they do not change the results). Re-running resumes every
+# unfinished stage; a stage killed before its first checkpoint starts over (`--restart`: its
+# folder is moved aside to <dir>.old-<secs>, nothing is deleted).
 # Curves: asi plot OUT_DIR/asi_s* OUT_DIR/hess_s* ... (the _sN suffix is the seed tag).
 set -euo pipefail
 
@@ -33,6 +36,7 @@ fr_start=${FR_START:-200}
 si_start=${SI_START:-300}
 jobs=${JOBS:-2}
 nice_level=${NICE:-19}
+ckpt_mins=${CKPT_MINS:-10}
 bin=${ASI_BIN:-target/release/asi}
 
 if (( episodes <= si_start || si_start <= fr_start )); then
@@ -78,11 +82,18 @@ run() {
         echo "$(basename "$dir"): at episode $until already"
         return
     fi
+    # A folder without a serial checkpoint holds a stage killed before its first one: asi
+    # refuses to start over in it, so it is moved aside.
+    local restart=""
+    if [[ -e $dir && ! -d $dir/checkpoints/serial ]]; then
+        restart="--restart"
+        echo "$(basename "$dir"): no checkpoint (killed before its first), starting over"
+    fi
     echo "$(date -u +%T) $(basename "$dir"): to episode $until (${flags[$arm]:-defaults})"
     # shellcheck disable=SC2086  # the switches are separate words on purpose
     nice -n "$nice_level" "$bin" train --serial --config "$config" --seed "$seed" \
-        --run-dir "$dir" ${flags[$arm]} --set run.max_episodes="$until" \
-        >>"$dir.log" 2>&1
+        --run-dir "$dir" $restart ${flags[$arm]} --set run.max_episodes="$until" \
+        --set run.checkpoint_interval_mins="$ckpt_mins" >>"$dir.log" 2>&1
     echo "$(date -u +%T) $(basename "$dir"): done"
 }
 
