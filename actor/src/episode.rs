@@ -359,7 +359,7 @@ impl Episode {
             *d = sg - phi;
         }
         self.decision_obs.copy_from_slice(&self.obs);
-        self.low_noise_free = decided.deterministic_low();
+        self.low_noise_free = decided.deterministic_low() && params.noise_free_navigation;
         let source = match decided.choice {
             FrChoice::Waypoint { .. } => SubgoalSource::FrontierRoute,
             FrChoice::Count { .. } => SubgoalSource::FrontierCount,

@@ -15,7 +15,8 @@
 //!      use the normal HESS/policy sources (digest §7 item 1);
 //!   2. navigation: the route point nearest to ag (Eq. 9, Euclidean, first on ties), then the
 //!      point k further (k uniform in `asi.fr_k_range`, inclusive), clamped to the last node;
-//!      an empty route gives g_F itself ([`waypoint`]). The low level acts deterministically;
+//!      an empty route gives g_F itself ([`waypoint`]). The low level acts deterministically
+//!      (with `asi.fr_noise_free_low = false`, an experiment, it keeps its noise);
 //!   3. count mode: `asi.count_mode_candidates` points uniform in the ±abs_range box around ag,
 //!      the least visited by the graph's n(v) (Eq. 10) chosen by the oracle; with no answer the
 //!      first candidate is taken (counted). The low level keeps its exploration noise;
@@ -53,6 +54,8 @@ pub struct FrontierParams {
     /// FR mode ends after the near-frontier switch (`asi.near_frontier = "end_fr"`); false:
     /// count mode for the rest of the episode.
     pub end_at_frontier: bool,
+    /// The low level navigates without exploration noise (`asi.fr_noise_free_low`).
+    pub noise_free_navigation: bool,
 }
 
 impl FrontierParams {
@@ -78,6 +81,7 @@ impl FrontierParams {
             n_candidates: asi.count_mode_candidates,
             abs_range: config.hierarchy.abs_range as f32,
             end_at_frontier: asi.near_frontier == NearFrontier::EndFr,
+            noise_free_navigation: asi.fr_noise_free_low,
         }))
     }
 }

@@ -131,6 +131,7 @@ fn params() -> FrontierParams {
         n_candidates: 100,
         abs_range: 10.0,
         end_at_frontier: false,
+        noise_free_navigation: true,
     }
 }
 
@@ -866,8 +867,19 @@ fn fr_episodes_replay_exactly_for_a_seed() {
 /// The actions of the first episode of an actor on the deterministic low level with the given
 /// exploration noise, under `fr_prob`.
 fn low_actions(noise_scale: f64, random_eps: f64, fr_prob: f32) -> Vec<Vec<f32>> {
+    low_actions_with(noise_scale, random_eps, fr_prob, true)
+}
+
+/// [`low_actions`] with `asi.fr_noise_free_low` set to `noise_free`.
+fn low_actions_with(
+    noise_scale: f64,
+    random_eps: f64,
+    fr_prob: f32,
+    noise_free: bool,
+) -> Vec<Vec<f32>> {
     let mut config = config();
     config.asi.stuck_threshold = 0.0;
+    config.asi.fr_noise_free_low = noise_free;
     config.learner.low.algo = protocol::config::LowAlgo::Deterministic;
     config.learner.low.deterministic.actor_hidden = vec![32, 32];
     config.learner.low.deterministic.critic_hidden = vec![32, 32];
@@ -889,4 +901,13 @@ fn the_low_level_navigates_without_exploration_noise() {
     assert_eq!(low_actions(0.1, 0.0, 1.0), low_actions(0.5, 0.3, 1.0));
     // Control: in a normal episode the noise settings change the actions.
     assert_ne!(low_actions(0.1, 0.0, 0.0), low_actions(0.5, 0.3, 0.0));
+}
+
+#[test]
+fn with_fr_noise_free_low_off_navigation_keeps_the_exploration_noise() {
+    // The same FR episode as above with the noise left on: the noise settings change it.
+    assert_ne!(
+        low_actions_with(0.1, 0.0, 1.0, false),
+        low_actions_with(0.5, 0.3, 1.0, false)
+    );
 }

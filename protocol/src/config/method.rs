@@ -358,6 +358,10 @@ pub struct AsiConfig {
     /// after a stuck switch and later decisions come from the episode's normal sources — HESS
     /// exploration subgoals drawn from stored states, or the policy).
     pub near_frontier: NearFrontier,
+    /// The low level acts without exploration noise while an FR episode navigates its route.
+    /// Default true. Source: code. false is an experiment (not in the paper): navigation
+    /// segments keep the low level's exploration noise, as count mode does.
+    pub fr_noise_free_low: bool,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
     /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code.
@@ -425,6 +429,7 @@ impl Default for AsiConfig {
             count_mode_candidates: 100,
             count_mode_score: CountModeScore::GraphVisits,
             near_frontier: NearFrontier::CountMode,
+            fr_noise_free_low: true,
             si_start_episode: 300,
             si_alpha: 0.01,
             si_beta: 0.001,
