@@ -37,6 +37,9 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let dir = ctx.checkpoint_dir().join(SUBDIR);
     let (mut service, start) = open_service(ctx, &dir, dims)?;
     let mut checkpoints = Checkpoints::new(dir, config.run.checkpoint_interval_mins);
+    if start.restored_from.is_some() {
+        checkpoints.mark_saved(&service);
+    }
     let node = node(ctx, "graph-service")?;
     let channels = Channels::new(config, &ctx.run_id, &layout);
     let trajectories = channels.trajectory_subscriber(&node)?;
@@ -222,8 +225,10 @@ pub(crate) fn open_service(
 }
 
 /// When the graph-service writes checkpoints: every `run.checkpoint_interval_mins` and at a
-/// clean stop. A failed write is logged, counted in the status and retried at the next
-/// interval; serving goes on.
+/// clean stop, unless nothing changed since the last one written or restored (same counters:
+/// no chunk, weights, request or report since), which would only push an older, different
+/// checkpoint out of the ones kept. A failed write is logged, counted in the status and
+/// retried at the next interval; serving goes on.
 pub(crate) struct Checkpoints {
     dir: PathBuf,
     interval: Duration,
@@ -231,6 +236,8 @@ pub(crate) struct Checkpoints {
     written: u64,
     last_path: Option<PathBuf>,
     errors: Vec<String>,
+    /// The service's counters at the last checkpoint written or restored.
+    saved: Option<graph_service::GraphStats>,
 }
 
 impl Checkpoints {
@@ -242,7 +249,13 @@ impl Checkpoints {
             written: 0,
             last_path: None,
             errors: Vec::new(),
+            saved: None,
         }
+    }
+
+    /// Records `service` as the state of the newest checkpoint (a restored one).
+    fn mark_saved(&mut self, service: &GraphService) {
+        self.saved = Some(service.stats());
     }
 
     /// Writes a checkpoint if the interval has passed since the last attempt.
@@ -255,6 +268,12 @@ impl Checkpoints {
     /// Writes a checkpoint now and logs its size and write time (or the error).
     pub(crate) fn write(&mut self, service: &GraphService) {
         let clock = Instant::now();
+        let stats = service.stats();
+        if self.saved.as_ref() == Some(&stats) {
+            tracing::info!("no graph-service checkpoint: nothing changed since the last one");
+            self.last = Instant::now();
+            return;
+        }
         match service.save(&self.dir) {
             Ok(ckpt) => {
                 let m = &ckpt.manifest;
@@ -268,6 +287,7 @@ impl Checkpoints {
                 );
                 self.written += 1;
                 self.last_path = Some(ckpt.path);
+                self.saved = Some(stats);
             }
             Err(err) => {
                 tracing::error!("writing a graph-service checkpoint failed: {err:#}");
@@ -370,4 +390,54 @@ fn graph_metrics(stats: &graph_service::GraphStats) -> Vec<(String, f64)> {
         ),
         ("graph/reach_samples".to_owned(), stats.reach_samples as f64),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn checkpoint_names(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .map(|d| {
+                d.flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .collect()
+            })
+            .unwrap_or_default();
+        names.retain(|n| n.starts_with("ckpt-"));
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_checkpoint_is_written_only_when_the_service_changed_since_the_last() {
+        let config = protocol::Config::load(Some(Path::new("configs/smoke.toml")), &[]).unwrap();
+        let task = task_info(&config).unwrap();
+        let mut service = GraphService::new(&config, task.dims, 1).unwrap();
+        let dir = std::env::temp_dir().join(format!("asi-gs-ckpts-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut checkpoints = Checkpoints::new(dir.clone(), 30.0);
+        checkpoints.write(&service);
+        assert_eq!(checkpoint_names(&dir), ["ckpt-000001"]);
+        checkpoints.write(&service);
+        assert_eq!(checkpoint_names(&dir), ["ckpt-000001"], "nothing changed");
+        assert_eq!(checkpoints.written, 1);
+        // A request (here a malformed one) changes the counters: written again.
+        let header = protocol::graph::GraphRequestHeader::new(
+            1,
+            protocol::graph::GraphRequestKind::FrontierRoute,
+            protocol::PhiVersion(0),
+        );
+        let _ = service.handle(&header, b"not postcard");
+        checkpoints.write(&service);
+        assert_eq!(checkpoint_names(&dir), ["ckpt-000001", "ckpt-000002"]);
+        // A restored service counts as saved: stopping it at once writes nothing.
+        let resumed = GraphService::restore_newest_valid(&dir, &config, task.dims).unwrap();
+        let (restored, _) = resumed.restored.expect("the newest checkpoint restores");
+        let mut after_restore = Checkpoints::new(dir.clone(), 30.0);
+        after_restore.mark_saved(&restored);
+        after_restore.write(&restored);
+        assert_eq!(checkpoint_names(&dir), ["ckpt-000001", "ckpt-000002"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
