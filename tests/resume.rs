@@ -87,6 +87,17 @@ fn train(dir: &RunDir, extra: &[&str]) -> Output {
     wait_with_watchdog(child, &dir.0)
 }
 
+/// [`train`], asserting that the launch succeeded (`what` names it in the message).
+fn train_ok(dir: &RunDir, extra: &[&str], what: &str) -> Output {
+    let output = train(dir, extra);
+    assert!(
+        output.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
 fn wait_with_watchdog(mut child: Child, dir: &Path) -> Output {
     let deadline = Instant::now() + WATCHDOG;
     while child.try_wait().unwrap().is_none() {
@@ -120,6 +131,17 @@ fn kill_children(dir: &Path) {
             }
         }
     }
+}
+
+/// The names of the entries of `folder`, sorted.
+fn names_in(folder: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(folder)
+        .unwrap_or_else(|e| panic!("{}: {e}", folder.display()))
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
 }
 
 fn as_u64(v: &Value, key: &str) -> u64 {
@@ -161,12 +183,7 @@ fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
     let budget = format!("run.max_episodes={}", as_u64(before, "episodes") + 6);
     let mut args = vec!["--set", budget.as_str()];
     args.extend_from_slice(extra);
-    let second = train(dir, &args);
-    assert!(
-        second.status.success(),
-        "second launch: {}",
-        String::from_utf8_lossy(&second.stderr)
-    );
+    let second = train_ok(dir, &args, "second launch");
     let stdout = String::from_utf8_lossy(&second.stdout);
     assert!(
         stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
@@ -188,12 +205,7 @@ fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
 fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = RunDir::new("process");
-    let first = train(&dir, &["--set", "run.max_episodes=6"]);
-    assert!(
-        first.status.success(),
-        "first launch: {}",
-        String::from_utf8_lossy(&first.stderr)
-    );
+    train_ok(&dir, &["--set", "run.max_episodes=6"], "first launch");
     assert_eq!(
         dir.checkpoints(),
         ["ckpt-000001"],
@@ -271,23 +283,14 @@ fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_a
     // so the first launch leaves exactly one graph-service checkpoint however slow the machine,
     // and the second launch cannot prune the damaged one with interval checkpoints.
     let no_interval = "run.checkpoint_interval_mins=600";
-    let first = train(&dir, &["--set", "run.max_episodes=6", "--set", no_interval]);
-    assert!(
-        first.status.success(),
-        "first launch: {}",
-        String::from_utf8_lossy(&first.stderr)
+    train_ok(
+        &dir,
+        &["--set", "run.max_episodes=6", "--set", no_interval],
+        "first launch",
     );
     assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
     let graph_dir = dir.0.join("checkpoints/graph-service");
-    let graph_ckpts = || {
-        let mut names: Vec<String> = std::fs::read_dir(&graph_dir)
-            .unwrap()
-            .flatten()
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
-        names
-    };
+    let graph_ckpts = || names_in(&graph_dir);
     assert_eq!(
         graph_ckpts(),
         ["ckpt-000001"],
@@ -353,11 +356,10 @@ fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_a
 fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_before_starting() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = RunDir::new("serial");
-    let first = train(&dir, &["--serial", "--set", "run.max_episodes=4"]);
-    assert!(
-        first.status.success(),
-        "first launch: {}",
-        String::from_utf8_lossy(&first.stderr)
+    train_ok(
+        &dir,
+        &["--serial", "--set", "run.max_episodes=4"],
+        "first launch",
     );
     assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
     let steps = *env_steps_per_line(&dir.0).last().unwrap();
@@ -384,21 +386,12 @@ fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_b
 
     // Launched again with nothing left to do: no checkpoint is rewritten (a re-save of the
     // same state would push an older, different one out of the two kept).
-    let serial_ckpts = |dir: &RunDir| {
-        let mut names: Vec<String> = std::fs::read_dir(dir.0.join("checkpoints/serial"))
-            .unwrap()
-            .flatten()
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
-        names
-    };
+    let serial_ckpts = |dir: &RunDir| names_in(&dir.0.join("checkpoints/serial"));
     let serial_before = serial_ckpts(&dir);
-    let again = train(&dir, &["--serial", "--set", "run.max_episodes=4"]);
-    assert!(
-        again.status.success(),
-        "launch with nothing to do: {}",
-        String::from_utf8_lossy(&again.stderr)
+    let again = train_ok(
+        &dir,
+        &["--serial", "--set", "run.max_episodes=4"],
+        "launch with nothing to do",
     );
     let log = String::from_utf8_lossy(&again.stderr);
     assert!(
@@ -413,11 +406,10 @@ fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_b
         "no metrics line added"
     );
 
-    let second = train(&dir, &["--serial", "--set", "run.max_episodes=8"]);
-    assert!(
-        second.status.success(),
-        "second launch: {}",
-        String::from_utf8_lossy(&second.stderr)
+    let second = train_ok(
+        &dir,
+        &["--serial", "--set", "run.max_episodes=8"],
+        "second launch",
     );
     assert!(String::from_utf8_lossy(&second.stdout).contains("resuming from checkpoint 1"));
     let lines = env_steps_per_line(&dir.0);
@@ -438,14 +430,10 @@ fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_b
         "{stderr}"
     );
 
-    let restarted = train(
+    let restarted = train_ok(
         &dir,
         &["--serial", "--restart", "--set", "run.max_episodes=2"],
-    );
-    assert!(
-        restarted.status.success(),
-        "restart: {}",
-        String::from_utf8_lossy(&restarted.stderr)
+        "restart",
     );
     let stdout = String::from_utf8_lossy(&restarted.stdout);
     let moved = stdout

@@ -396,17 +396,9 @@ fn graph_metrics(stats: &graph_service::GraphStats) -> Vec<(String, f64)> {
 mod tests {
     use super::*;
 
-    fn checkpoint_names(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> = std::fs::read_dir(dir)
-            .map(|d| {
-                d.flatten()
-                    .map(|e| e.file_name().to_string_lossy().into_owned())
-                    .collect()
-            })
-            .unwrap_or_default();
-        names.retain(|n| n.starts_with("ckpt-"));
-        names.sort();
-        names
+    fn sequences(dir: &Path) -> Vec<u64> {
+        let listed = ckpt::list(dir, "ckpt-").unwrap();
+        listed.into_iter().map(|(sequence, _)| sequence).collect()
     }
 
     #[test]
@@ -418,9 +410,9 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         let mut checkpoints = Checkpoints::new(dir.clone(), 30.0);
         checkpoints.write(&service);
-        assert_eq!(checkpoint_names(&dir), ["ckpt-000001"]);
+        assert_eq!(sequences(&dir), [1]);
         checkpoints.write(&service);
-        assert_eq!(checkpoint_names(&dir), ["ckpt-000001"], "nothing changed");
+        assert_eq!(sequences(&dir), [1], "nothing changed");
         assert_eq!(checkpoints.written, 1);
         // A request (here a malformed one) changes the counters: written again.
         let header = protocol::graph::GraphRequestHeader::new(
@@ -430,14 +422,14 @@ mod tests {
         );
         let _ = service.handle(&header, b"not postcard");
         checkpoints.write(&service);
-        assert_eq!(checkpoint_names(&dir), ["ckpt-000001", "ckpt-000002"]);
+        assert_eq!(sequences(&dir), [1, 2]);
         // A restored service counts as saved: stopping it at once writes nothing.
         let resumed = GraphService::restore_newest_valid(&dir, &config, task.dims).unwrap();
         let (restored, _) = resumed.restored.expect("the newest checkpoint restores");
         let mut after_restore = Checkpoints::new(dir.clone(), 30.0);
         after_restore.mark_saved(&restored);
         after_restore.write(&restored);
-        assert_eq!(checkpoint_names(&dir), ["ckpt-000001", "ckpt-000002"]);
+        assert_eq!(sequences(&dir), [1, 2]);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
