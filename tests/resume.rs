@@ -176,10 +176,12 @@ fn stored_steps_per_line(dir: &Path) -> Vec<u64> {
 
 /// Launches `dir`'s run again with 6 episodes more than the learner status `before` (taken at
 /// the first launch's stop) and `extra` arguments; checks that it succeeded, resumed from
-/// learner checkpoint 1 at `before`'s env steps, and trained on (env steps and low updates
-/// grew). Returns the learner status after it.
+/// learner checkpoint 1 at `before`'s env steps, trained on (env steps and low updates
+/// grew), and appended to the metrics file with no line starting again from 0. Returns the
+/// learner status after it.
 fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
     let (steps, updates) = (as_u64(before, "env_steps"), as_u64(before, "updates_low"));
+    let lines_before = env_steps_per_line(&dir.0).len();
     let budget = format!("run.max_episodes={}", as_u64(before, "episodes") + 6);
     let mut args = vec!["--set", budget.as_str()];
     args.extend_from_slice(extra);
@@ -197,6 +199,16 @@ fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
     assert!(
         as_u64(&after, "updates_low") > updates,
         "updates continued: {before} → {after}"
+    );
+    // The metrics file goes on, and no line of the second launch starts again from 0.
+    let lines = env_steps_per_line(&dir.0);
+    assert!(
+        lines.len() > lines_before,
+        "the second launch appended metrics"
+    );
+    assert!(
+        lines[lines_before..].iter().all(|&s| s >= steps),
+        "{lines:?}"
     );
     after
 }
@@ -222,7 +234,6 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     let before = dir.status("learner");
     let (steps, updates) = (as_u64(&before, "env_steps"), as_u64(&before, "updates_low"));
     assert!(steps > 0 && updates > 0, "{before}");
-    let lines_before = env_steps_per_line(&dir.0).len();
 
     // The first launch overshoots its budget while it stops; give the second 6 more episodes.
     let episodes = as_u64(&before, "episodes");
@@ -230,16 +241,6 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     assert!(
         as_u64(&after, "episodes") >= episodes + 6,
         "the budget counts both launches: {after}"
-    );
-    // The metrics file goes on, and no line of the second launch starts again from 0.
-    let lines = env_steps_per_line(&dir.0);
-    assert!(
-        lines.len() > lines_before,
-        "the second launch appended metrics"
-    );
-    assert!(
-        lines[lines_before..].iter().all(|&s| s >= steps),
-        "{lines:?}"
     );
     assert_eq!(dir.checkpoints(), ["ckpt-000001", "ckpt-000002"]);
     // The graph-service started from its checkpoint: the store and counters went on.
@@ -301,7 +302,6 @@ fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_a
     let before = dir.status("learner");
     let (steps, updates) = (as_u64(&before, "env_steps"), as_u64(&before, "updates_low"));
     assert!(steps > 0 && updates > 0, "{before}");
-    let lines_before = env_steps_per_line(&dir.0).len();
 
     // Flip one byte in the middle of the store (the manifest keeps its checksum).
     let damaged = graph_dir.join("ckpt-000001");
@@ -314,15 +314,6 @@ fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_a
 
     // The learner resumed from its own checkpoint and trained on.
     resume_six_more(&dir, &before, &["--set", no_interval]);
-    let lines = env_steps_per_line(&dir.0);
-    assert!(
-        lines.len() > lines_before,
-        "the second launch appended metrics"
-    );
-    assert!(
-        lines[lines_before..].iter().all(|&s| s >= steps),
-        "{lines:?}"
-    );
     // The graph-service refused its only checkpoint, naming the file, and started empty.
     let graph_after = dir.status("graph-service");
     assert!(graph_after["restored_from"].is_null(), "{graph_after}");
