@@ -48,7 +48,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         .unwrap_or_else(|| Command::Train(cli::TrainArgs::default()))
     {
         Command::Train(args) => {
-            let ctx = launcher::prepare(&args)?;
+            let launcher::Launch::Start(ctx) = launcher::prepare(&args)? else {
+                return Ok(());
+            };
             if args.serial {
                 serial::run(ctx)
             } else {

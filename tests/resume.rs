@@ -235,6 +235,30 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     let (steps, updates) = (as_u64(&before, "env_steps"), as_u64(&before, "updates_low"));
     assert!(steps > 0 && updates > 0, "{before}");
 
+    // The same command again: the checkpoint already reaches the budget, so nothing starts
+    // (no process trains a few updates and writes another checkpoint before it stops).
+    let metrics_before = std::fs::read(dir.0.join("metrics.jsonl")).unwrap();
+    let again = train_ok(
+        &dir,
+        &["--set", "run.max_episodes=6"],
+        "launch with nothing to do",
+    );
+    let stdout = String::from_utf8_lossy(&again.stdout);
+    assert!(
+        stdout.contains(&format!(
+            "already finished: checkpoint 1 holds {} episodes and {steps} env steps",
+            as_u64(&before, "episodes")
+        )),
+        "{stdout}"
+    );
+    assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
+    assert_eq!(
+        names_in(&dir.0.join("checkpoints/graph-service")),
+        ["ckpt-000001"]
+    );
+    assert!(std::fs::read(dir.0.join("metrics.jsonl")).unwrap() == metrics_before);
+    assert_eq!(dir.status("learner"), before, "no learner ran");
+
     // The first launch overshoots its budget while it stops; give the second 6 more episodes.
     let episodes = as_u64(&before, "episodes");
     let after = resume_six_more(&dir, &before, &[]);
@@ -384,10 +408,10 @@ fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_b
         &["--serial", "--set", "run.max_episodes=4"],
         "launch with nothing to do",
     );
-    let log = String::from_utf8_lossy(&again.stderr);
+    let stdout = String::from_utf8_lossy(&again.stdout);
     assert!(
-        log.contains("no final checkpoint: nothing was ingested or trained since checkpoint 1"),
-        "{log}"
+        stdout.contains("already finished: checkpoint 1 holds 4 episodes"),
+        "{stdout}"
     );
     assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
     assert_eq!(serial_ckpts(&dir), serial_before);

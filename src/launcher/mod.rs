@@ -227,9 +227,11 @@ fn wait_for_services(
 
 /// Resolves `asi train`'s arguments into a run context (writes the resolved config). An
 /// existing run folder with a checkpoint is resumed ("resuming from checkpoint N (env steps
-/// S)"), after checking that the checkpoint fits this build and config; with `--restart` the
-/// old folder is first moved aside ([`move_aside`]) and the run starts over.
-pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
+/// S)"), after checking that the checkpoint fits this build and config, unless that checkpoint
+/// already reaches the budget ([`Launch::Finished`]: nothing starts, so a finished run's
+/// folder is not touched by a repeated command); with `--restart` the old folder is first
+/// moved aside ([`move_aside`]) and the run starts over.
+pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
     let mut overrides = args.set.clone();
     if let Some(seed) = args.seed {
         overrides.push(format!("run.seed={seed}"));
@@ -258,6 +260,16 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
     }
     let resume = match resume_point(&config, &run_dir)? {
         Some(manifest) => {
+            if let Some(done) = finished(&config.run, &manifest) {
+                println!(
+                    "run in {} already finished: checkpoint {} holds {done}; nothing was \
+                     started or changed. To train on, raise the budget (e.g. --set \
+                     run.max_episodes=N); to start over, add --restart",
+                    run_dir.display(),
+                    manifest.sequence
+                );
+                return Ok(Launch::Finished);
+            }
             println!(
                 "resuming from checkpoint {} (env steps {})",
                 manifest.sequence, manifest.env_steps
@@ -269,7 +281,42 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<RunContext> {
             false
         }
     };
-    RunContext::create(config, run_dir, resume, lock)
+    Ok(Launch::Start(RunContext::create(
+        config, run_dir, resume, lock,
+    )?))
+}
+
+/// What `asi train` does after [`prepare`].
+pub enum Launch {
+    /// Train, in this context.
+    Start(RunContext),
+    /// Nothing: the checkpoint to resume from already reaches the budget (the folder is
+    /// left exactly as it was; the lock is released on return).
+    Finished,
+}
+
+/// `Some(what the checkpoint holds)` when a run resumed from `manifest` would have nothing to
+/// do: its episodes or env steps already reach `run.max_episodes` / `run.max_env_steps`.
+/// Checkpoints of builds that did not record episodes are judged by env steps alone.
+fn finished(run: &protocol::config::RunConfig, manifest: &Manifest) -> Option<String> {
+    let by_steps = run
+        .max_env_steps
+        .is_some_and(|max| manifest.env_steps >= max);
+    let by_episodes = manifest
+        .episodes_completed
+        .is_some_and(|episodes| episodes >= run.max_episodes);
+    (by_steps || by_episodes).then(|| {
+        let episodes = manifest
+            .episodes_completed
+            .map_or("?".to_owned(), |e| e.to_string());
+        let steps_budget = run
+            .max_env_steps
+            .map_or(String::new(), |max| format!(", run.max_env_steps={max}"));
+        format!(
+            "{episodes} episodes and {} env steps (budget run.max_episodes={}{steps_budget})",
+            manifest.env_steps, run.max_episodes
+        )
+    })
 }
 
 /// A folder with an earlier run's outputs but no learner checkpoint (that run stopped before
@@ -360,4 +407,45 @@ pub fn move_aside(run_dir: &std::path::Path) -> anyhow::Result<Option<std::path:
     std::fs::rename(run_dir, &old)
         .with_context(|| format!("moving {} to {}", run_dir.display(), old.display()))?;
     Ok(Some(old))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn manifest(env_steps: u64, episodes_completed: Option<u64>) -> Manifest {
+        Manifest {
+            format_version: FORMAT_VERSION,
+            protocol_version: protocol::PROTOCOL_VERSION,
+            layout_hash: 0,
+            config_fingerprint: String::new(),
+            sequence: 3,
+            env_steps,
+            updates_low: 0,
+            updates_high: 0,
+            episodes_completed,
+            files: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_checkpoint_at_either_budget_is_finished_and_one_below_both_is_not() {
+        let mut run = protocol::config::RunConfig {
+            max_episodes: 10,
+            ..Default::default()
+        };
+        assert_eq!(finished(&run, &manifest(5_000, Some(9))), None);
+        assert_eq!(
+            finished(&run, &manifest(5_000, Some(10))).as_deref(),
+            Some("10 episodes and 5000 env steps (budget run.max_episodes=10)")
+        );
+        // Old checkpoints without an episode count never count as finished by episodes.
+        assert_eq!(finished(&run, &manifest(5_000, None)), None);
+        run.max_env_steps = Some(5_000);
+        assert_eq!(
+            finished(&run, &manifest(5_000, None)).as_deref(),
+            Some("? episodes and 5000 env steps (budget run.max_episodes=10, run.max_env_steps=5000)")
+        );
+        assert_eq!(finished(&run, &manifest(4_999, Some(9))), None);
+    }
 }

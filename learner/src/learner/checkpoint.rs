@@ -105,6 +105,10 @@ pub struct Manifest {
     pub updates_low: u64,
     /// High-level updates run when it was written.
     pub updates_high: u64,
+    /// Episodes completed when it was written (`None` in checkpoints of builds before it was
+    /// recorded; it is read back for the launch's "already finished" check only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub episodes_completed: Option<u64>,
     /// Every other file of the folder.
     pub files: Vec<FileEntry>,
 }
@@ -262,6 +266,7 @@ impl Learner {
             env_steps: self.stats.env_steps,
             updates_low: self.updates_low,
             updates_high: self.updates_high,
+            episodes_completed: Some(self.stats.episodes_completed),
             files: folder.files().to_vec(),
         };
         let json = serde_json::to_vec_pretty(&manifest)
