@@ -52,9 +52,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 return Ok(());
             };
             if args.serial {
-                serial::run(ctx)
+                serial::run(*ctx)
             } else {
-                launcher::run(ctx)
+                launcher::run(*ctx)
             }
         }
         Command::Learner(args) => {

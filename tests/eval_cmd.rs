@@ -3,6 +3,8 @@
 //! `asi eval` evaluates those weights (figures, PNG); bad run folders and damaged weights get
 //! clear errors. Each run has its own folder and run name, and a watchdog.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -59,14 +61,7 @@ fn a_serial_run_stops_on_sigterm_with_a_checkpoint_and_asi_eval_evaluates_its_we
     let dir_arg = dir.to_string_lossy().into_owned();
     let name = format!("run.name=ev{}", std::process::id());
     let mut child = Command::new(env!("CARGO_BIN_EXE_asi"))
-        .args([
-            "train",
-            "--serial",
-            "--config",
-            "configs/smoke.toml",
-            "--run-dir",
-            &dir_arg,
-        ])
+        .args(common::serial_smoke_args(&dir))
         .args(["--set", &name, "--set", "run.max_episodes=1000000"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdin(Stdio::null())

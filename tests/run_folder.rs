@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
-use common::{signal, spawn_asi, Run, WATCHDOG};
+use common::{serial_smoke_args, signal, spawn_asi, Run, WATCHDOG};
 
 /// Every file under `folder` but the lock file (which a refused launch rewrites with its pid)
 /// and `status/` (the killed run's), with its bytes.
@@ -40,16 +40,8 @@ fn files_of(folder: &Path) -> BTreeMap<String, Vec<u8>> {
 /// watchdog); returns whether it succeeded and its output.
 fn launch(dir: &Path, extra: &[&str]) -> (bool, String) {
     let log = dir.with_extension("second.log");
-    let dir_arg = dir.to_string_lossy().into_owned();
-    let mut args = vec![
-        "train",
-        "--serial",
-        "--config",
-        "configs/smoke.toml",
-        "--run-dir",
-        &dir_arg,
-    ];
-    args.extend(extra);
+    let mut args = serial_smoke_args(dir);
+    args.extend(extra.iter().map(|a| a.to_string()));
     let mut child = spawn_asi(&args, &log);
     let started = std::time::Instant::now();
     let status = loop {

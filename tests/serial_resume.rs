@@ -27,6 +27,8 @@
 //! the SI buffer is not filled with SI off (the fork starts SI with an empty buffer) and when
 //! an FR-on actor draws its FR number while `fr_prob` is 0.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -76,16 +78,11 @@ fn serial_train(run_dir: &Path, max_episodes: u64, extra: &[String]) -> Output {
 
 /// Starts `asi train --serial` (see [`serial_train`]); returns the child and its arguments.
 fn spawn_serial(run_dir: &Path, max_episodes: u64, extra: &[String]) -> (Child, Vec<String>) {
-    let mut args = vec![
-        "train".to_owned(),
-        "--serial".to_owned(),
-        "--config".to_owned(),
-        "configs/smoke.toml".to_owned(),
-        "--run-dir".to_owned(),
-        run_dir.to_string_lossy().into_owned(),
+    let mut args = common::serial_smoke_args(run_dir);
+    args.extend([
         "--set".to_owned(),
         format!("run.max_episodes={max_episodes}"),
-    ];
+    ]);
     args.extend(extra.iter().cloned());
     let child = Command::new(env!("CARGO_BIN_EXE_asi"))
         .args(&args)
@@ -314,15 +311,8 @@ fn stop_by_signal_and_resume(dir: &Path) -> u64 {
 
 /// Launches `asi train --serial` expecting a failure; returns its stderr.
 fn serial_train_fails(run_dir: &Path, extra: &[&str]) -> String {
-    let mut args = vec![
-        "train",
-        "--serial",
-        "--config",
-        "configs/smoke.toml",
-        "--run-dir",
-        run_dir.to_str().unwrap(),
-    ];
-    args.extend(extra);
+    let mut args = common::serial_smoke_args(run_dir);
+    args.extend(extra.iter().map(|a| a.to_string()));
     let output = Command::new(env!("CARGO_BIN_EXE_asi"))
         .args(&args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))

@@ -281,15 +281,15 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
             false
         }
     };
-    Ok(Launch::Start(RunContext::create(
+    Ok(Launch::Start(Box::new(RunContext::create(
         config, run_dir, resume, lock,
-    )?))
+    )?)))
 }
 
 /// What `asi train` does after [`prepare`].
 pub enum Launch {
     /// Train, in this context.
-    Start(RunContext),
+    Start(Box<RunContext>),
     /// Nothing: the checkpoint to resume from already reaches the budget (the folder is
     /// left exactly as it was; the lock is released on return).
     Finished,

@@ -182,6 +182,18 @@ pub fn spawn_asi<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>, log: &Path)
         .expect("asi starts")
 }
 
+/// The arguments of `asi train --serial` on the smoke config in `run_dir` (more may follow).
+pub fn serial_smoke_args(run_dir: &Path) -> Vec<String> {
+    let mut args: Vec<String> = ["train", "--serial", "--config", "configs/smoke.toml"]
+        .map(str::to_owned)
+        .into();
+    args.extend([
+        "--run-dir".to_owned(),
+        run_dir.to_string_lossy().into_owned(),
+    ]);
+    args
+}
+
 /// A unique run folder path for `test` under the temp folder (not created).
 pub fn fresh_dir(test: &str) -> PathBuf {
     let nanos = std::time::SystemTime::now()
