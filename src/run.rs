@@ -22,6 +22,10 @@ use learner::{Learner, TaskDims};
 use protocol::config::RESOLVED_CONFIG_FILE;
 use protocol::{Config, RunId};
 
+mod tail;
+
+pub use tail::{move_lines_past, ResumePoint};
+
 /// File in the run folder holding the current run id (read by `asi graph` and tests).
 pub const RUN_ID_FILE: &str = "run_id";
 /// Folder in the run folder where each process writes its final status at a clean exit.

@@ -24,7 +24,9 @@
 //! store, while a running service keeps the graph of its last φ re-map until the next one. So
 //! serial mode writes the graph-service's checkpoint only where the two agree — at start and
 //! in every round whose broadcast re-mapped φ (its *base*) — and logs every chunk and request
-//! it gets after that ([`LoggedGraph`]); a resume restores the base and replays the log.
+//! it gets after that ([`LoggedGraph`]); a resume restores the base the serial checkpoint
+//! names (kept when later bases rotate the graph-service's checkpoints, so a run killed after
+//! more re-maps still resumes exactly) and replays the log.
 //!
 //! A resumed serial run (same folder; `run.max_episodes` or `run.max_env_steps` may grow)
 //! continues bit-identically to an uninterrupted run with the same seed — same `metrics.jsonl`
@@ -166,7 +168,10 @@ impl Serial {
             false => None,
         };
         let learner = crate::run::open_learner(&ctx, task.dims, task.episode_length)?;
-        let graph = open_graph(&ctx, task.dims)?;
+        let base = saved
+            .as_ref()
+            .and_then(|s| s.manifest.graph_base.as_deref());
+        let graph = open_graph(&ctx, task.dims, base)?;
         let actors = (0..config.run.n_actors as u32)
             .map(|id| Actor::new(config, ActorId(id), config.run.seed))
             .collect::<Result<Vec<_>, _>>()
@@ -337,6 +342,7 @@ impl Serial {
         };
         let (path, manifest) =
             checkpoint::write(&self.serial_dir, &self.ctx.config, &state, bytes, moment)?;
+        self.graph.protected = manifest.graph_base.clone();
         tracing::info!(
             secs = clock.elapsed().as_secs_f64(),
             "serial checkpoint written to {} ({})",
@@ -411,8 +417,40 @@ impl Serial {
 }
 
 /// The graph-service, restored from its newest checkpoint (the input log's base) if any.
-fn open_graph(ctx: &RunContext, dims: nets::TaskDims) -> anyhow::Result<LoggedGraph> {
+/// The serial graph-service: on a resume restored from `base`, the graph-service checkpoint the
+/// serial checkpoint's input log starts from (not necessarily the newest: a run killed after
+/// later φ re-maps wrote newer ones, with states the resumed run collects again); the newest
+/// valid one when there is no base or it does not restore (then the log is not replayed and
+/// the resume is not exact, as logged).
+fn open_graph(
+    ctx: &RunContext,
+    dims: nets::TaskDims,
+    base: Option<&str>,
+) -> anyhow::Result<LoggedGraph> {
     let dir = ctx.checkpoint_dir().join(graph_service::checkpoint::SUBDIR);
+    if let Some(name) = base {
+        let path = dir.join(name);
+        match GraphService::restore(&path, &ctx.config, dims) {
+            Ok((service, ckpt)) => {
+                tracing::info!(
+                    restored_stored_steps = ckpt.manifest.stored_steps,
+                    "serial graph-service restored from {}, the serial checkpoint's base",
+                    path.display()
+                );
+                return Ok(LoggedGraph::new(
+                    service,
+                    dir,
+                    Some(name.to_owned()),
+                    ctx.config.graph.max_stored_steps,
+                ));
+            }
+            Err(err) => tracing::warn!(
+                "the serial checkpoint's graph-service base {} does not restore ({err}); \
+                 trying the newest graph-service checkpoint instead",
+                path.display()
+            ),
+        }
+    }
     let (service, start) = open_service(ctx, &dir, dims)?;
     let from = start.restored_from.as_ref();
     tracing::info!(
@@ -628,6 +666,10 @@ struct LoggedGraph {
     /// The log holds every input since `base` (false after a failed base write or a dropped
     /// log, until the next base; nothing is logged meanwhile).
     complete: bool,
+    /// The base the newest serial checkpoint replays from (written or restored): kept when
+    /// later bases rotate the graph-service's checkpoints, so a run killed after more φ
+    /// re-maps still resumes exactly from that checkpoint.
+    protected: Option<String>,
 }
 
 impl LoggedGraph {
@@ -641,6 +683,7 @@ impl LoggedGraph {
             service,
             dir,
             complete: base.is_some(),
+            protected: base.clone(),
             base,
             log: Vec::new(),
             logged_steps: 0,
@@ -679,7 +722,11 @@ impl LoggedGraph {
         let clock = std::time::Instant::now();
         self.log.clear();
         self.logged_steps = 0;
-        match self.service.save(&self.dir) {
+        let protected = self
+            .protected
+            .as_deref()
+            .and_then(graph_service::checkpoint::sequence_of);
+        match self.service.save_protecting(&self.dir, protected) {
             Ok(ckpt) => {
                 tracing::info!(
                     stored_steps = ckpt.manifest.stored_steps,

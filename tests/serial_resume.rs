@@ -1,6 +1,8 @@
 //! Bit-exact serial resume (issue #7): a serial-mode run stopped after M episodes and resumed in
 //! the same folder ends with exactly the same `metrics.jsonl` and `eval.jsonl` as an
-//! uninterrupted run of N episodes with the same seed.
+//! uninterrupted run of N episodes with the same seed — also when it was SIGKILLed between
+//! checkpoints, after φ re-maps (the lines written past the checkpoint are moved to a side
+//! file, the graph-service comes back from the checkpoint's own base).
 //!
 //! The stops are deterministic: a launch with `run.max_episodes = M`, then, in the same folder,
 //! launches with larger values (the run-length knobs may change on resume). The smoke config's
@@ -267,13 +269,121 @@ fn a_serial_run_stopped_and_resumed_ends_with_the_metrics_of_an_uninterrupted_on
         &expected_eval,
         &lines(&tmp.0.join("signal").join("eval.jsonl")),
     );
+    let killed_dir = tmp.0.join("killed");
+    let killed = kill_past_a_checkpoint_and_resume(&killed_dir);
+    assert_same_lines(
+        &format!("metrics.jsonl, SIGKILLed at {killed} episodes, 8 after its checkpoint"),
+        &expected,
+        &lines(&killed_dir.join("metrics.jsonl")),
+    );
+    assert_same_lines(
+        "eval.jsonl, SIGKILLed",
+        &expected_eval,
+        &lines(&killed_dir.join("eval.jsonl")),
+    );
     eprintln!(
         "compared {} metrics lines and {} evaluations ({N_EPISODES} episodes) against runs \
-         stopped at {STOP_CHAINS:?} and at {signalled} (SIGINT) and resumed, in {:.1} s",
+         stopped at {STOP_CHAINS:?}, at {signalled} (SIGINT) and at {killed} (SIGKILL) and \
+         resumed, in {:.1} s",
         expected.len(),
         expected_eval.len(),
         start.elapsed().as_secs_f64()
     );
+}
+
+/// A run checkpointed at 8 episodes, launched on to [`N_EPISODES`] with no timed checkpoint
+/// and SIGKILLed once it has written metrics lines to 16 episodes or more (past the evaluation
+/// at 12), then resumed to the end. The resume must move the lines written after the
+/// checkpoint aside (they are written again) and keep them in side files. Returns the
+/// episodes of the last line before the kill.
+fn kill_past_a_checkpoint_and_resume(dir: &Path) -> u64 {
+    const CHECKPOINTED: u64 = 8;
+    const KILL_FROM: u64 = 16;
+    serial_train(dir, CHECKPOINTED, &[]);
+    let metrics = dir.join("metrics.jsonl");
+    let at_checkpoint = lines(&metrics).len();
+    let no_timer = [
+        "--set".to_owned(),
+        "run.checkpoint_interval_mins=1e6".to_owned(),
+    ];
+    let (mut child, _) = spawn_serial(dir, N_EPISODES, &no_timer);
+    let start = Instant::now();
+    let killed = loop {
+        // Whole lines only: the last one may be half-written.
+        let text = std::fs::read_to_string(&metrics).unwrap_or_default();
+        let last = text
+            .strip_suffix('\n')
+            .and_then(|whole| whole.lines().next_back())
+            .map(episodes_of);
+        if last.is_some_and(|e| e >= KILL_FROM) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            break last.unwrap();
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the launch to {N_EPISODES} ended before it could be killed"
+        );
+        assert!(
+            start.elapsed() < WATCHDOG,
+            "watchdog: no line at {KILL_FROM} episodes"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    assert!(killed < N_EPISODES, "killed at {killed}");
+    // What the killed launch wrote past the checkpoint (a last line may be half-written).
+    let text = std::fs::read_to_string(&metrics).unwrap();
+    let tail_at = text
+        .match_indices('\n')
+        .nth(at_checkpoint - 1)
+        .map_or(0, |(i, _)| i + 1);
+    let tail = &text[tail_at..];
+    let past = tail.matches('\n').count();
+    let evals_past = lines(&dir.join("eval.jsonl"))
+        .iter()
+        .filter(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["train_episodes"].as_u64()
+                > Some(CHECKPOINTED)
+        })
+        .count();
+    assert!(evals_past >= 1, "the evaluation at 12 episodes was written");
+    // The killed launch re-mapped φ twice after the checkpoint (every 4 episodes), writing
+    // two newer graph-service bases; the checkpoint's own base was kept beside them.
+    let serial_manifest = dir.join("checkpoints/serial/ckpt-000001/manifest.json");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(serial_manifest).unwrap()).unwrap();
+    let base = manifest["graph_base"].as_str().unwrap().to_owned();
+    let graph_ckpts: Vec<String> = std::fs::read_dir(dir.join("checkpoints/graph-service"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("ckpt-"))
+        .collect();
+    assert!(graph_ckpts.contains(&base), "{base} in {graph_ckpts:?}");
+    assert!(
+        graph_ckpts.iter().filter(|n| **n > base).count() >= 2,
+        "{base} in {graph_ckpts:?}"
+    );
+    let resumed = serial_train(dir, N_EPISODES, &[]);
+    let stdout = String::from_utf8_lossy(&resumed.stdout);
+    assert!(
+        stdout.contains(&format!(
+            "metrics.jsonl: {past} lines written after checkpoint 1"
+        )) && stdout.contains(&format!(
+            "eval.jsonl: {evals_past} lines written after checkpoint 1"
+        )),
+        "{stdout}"
+    );
+    // Nothing lost: the side file holds what the killed launch wrote past the checkpoint.
+    let side: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.to_string_lossy().contains("metrics.jsonl.past-ckpt-1-"))
+        .collect();
+    assert_eq!(side.len(), 1, "{side:?}");
+    assert!(std::fs::read_to_string(&side[0]).unwrap() == tail);
+    killed
 }
 
 /// A launch to [`N_EPISODES`] stopped by SIGINT once its first metrics lines are on disk

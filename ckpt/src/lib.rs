@@ -228,13 +228,28 @@ impl TmpFolder {
         manifest: &[u8],
         keep: usize,
     ) -> Result<PathBuf, FileError> {
+        self.commit_protecting(manifest_name, manifest, keep, None)
+    }
+
+    /// [`TmpFolder::commit`], but the checkpoint numbered `protected` is never removed (it is
+    /// kept beside the newest `keep`): serial mode's graph-service base, which its newest
+    /// serial checkpoint replays from, outlives the bases written after that checkpoint.
+    pub fn commit_protecting(
+        self,
+        manifest_name: &str,
+        manifest: &[u8],
+        keep: usize,
+        protected: Option<u64>,
+    ) -> Result<PathBuf, FileError> {
         write_synced(&self.tmp.join(manifest_name), manifest)?;
         let path = self
             .dir
             .join(format!("{}{:06}", self.prefix, self.sequence));
         fs::rename(&self.tmp, &path).map_err(|source| io_error(&path, source))?;
         sync_dir(&self.dir)?;
-        prune(self.existing, keep.saturating_sub(1))?;
+        let mut existing = self.existing;
+        existing.retain(|(seq, _)| Some(*seq) != protected);
+        prune(existing, keep.saturating_sub(1))?;
         Ok(path)
     }
 }
@@ -518,6 +533,19 @@ mod tests {
             .collect();
         assert_eq!(names, vec![2, 3]);
         assert_eq!(fs::read_dir(&dir).unwrap().count(), 2);
+        // A protected checkpoint stays however many are written after it; the others rotate.
+        for _ in 4..=6u64 {
+            let folder = TmpFolder::begin(&dir, "ckpt-", ".tmp-ckpt-").unwrap();
+            folder
+                .commit_protecting("manifest.json", b"{}", 2, Some(3))
+                .unwrap();
+        }
+        let names: Vec<_> = list(&dir, "ckpt-")
+            .unwrap()
+            .into_iter()
+            .map(|(s, _)| s)
+            .collect();
+        assert_eq!(names, vec![3, 5, 6]);
         fs::remove_dir_all(&dir).unwrap();
     }
 

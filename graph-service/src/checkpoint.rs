@@ -123,6 +123,11 @@ pub fn checkpoints_newest_first(dir: &Path) -> Result<Vec<PathBuf>, CheckpointEr
     Ok(all.into_iter().map(|(_, path)| path).collect())
 }
 
+/// The sequence number N of a checkpoint folder named `ckpt-N`.
+pub fn sequence_of(folder_name: &str) -> Option<u64> {
+    folder_name.strip_prefix(PREFIX)?.parse().ok()
+}
+
 /// The result of [`GraphService::restore_newest_valid`].
 #[derive(Debug)]
 pub struct Resumed {
@@ -136,6 +141,16 @@ impl GraphService {
     /// Writes a checkpoint into `dir` (created if missing) as `ckpt-N`, N one more than the
     /// newest there, then removes all but the newest [`KEEP`].
     pub fn save(&self, dir: &Path) -> Result<Checkpoint, CheckpointError> {
+        self.save_protecting(dir, None)
+    }
+
+    /// [`GraphService::save`], but the checkpoint `ckpt-<protected>` is kept too, however
+    /// old (serial mode: the base its newest serial checkpoint replays from).
+    pub fn save_protecting(
+        &self,
+        dir: &Path,
+        protected: Option<u64>,
+    ) -> Result<Checkpoint, CheckpointError> {
         let mut folder = TmpFolder::begin(dir, PREFIX, TMP_PREFIX)?;
         let store = save_store(&self.store).map_err(|p| corrupt(&folder.path_of(STORE_FILE), p))?;
         folder.add(STORE_FILE, &store)?;
@@ -165,7 +180,7 @@ impl GraphService {
         };
         let json = serde_json::to_vec_pretty(&manifest)
             .map_err(|e| corrupt(&folder.path_of(MANIFEST), e.to_string()))?;
-        let path = folder.commit(MANIFEST, &json, KEEP)?;
+        let path = folder.commit_protecting(MANIFEST, &json, KEEP, protected)?;
         Ok(Checkpoint { path, manifest })
     }
 

@@ -274,6 +274,21 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
                 "resuming from checkpoint {} (env steps {})",
                 manifest.sequence, manifest.env_steps
             );
+            let point = crate::run::ResumePoint {
+                sequence: manifest.sequence,
+                env_steps: manifest.env_steps,
+                episodes: manifest.episodes_completed,
+            };
+            for moved in crate::run::move_lines_past(&run_dir, point)? {
+                println!(
+                    "{}: {} lines written after checkpoint {} (a run stopped without a final \
+                     checkpoint) moved to {}; the resumed run writes that stretch again",
+                    moved.file.display(),
+                    moved.lines,
+                    manifest.sequence,
+                    moved.side_file.display()
+                );
+            }
             true
         }
         None => {
