@@ -197,7 +197,6 @@ fn put_float(out: &mut Vec<u8>, field: u32, value: f32) {
 
 /// One event read back from a file.
 #[derive(Debug, Clone, PartialEq, Default)]
-#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 pub struct Event {
     /// Seconds since the Unix epoch.
     pub wall_time: f64,
@@ -212,45 +211,86 @@ pub struct Event {
 /// Reads every event of a file written by [`EventWriter`], checking both CRCs of every record.
 #[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 pub fn read_events(path: &Path) -> anyhow::Result<Vec<Event>> {
-    let mut bytes = Vec::new();
-    File::open(path)
-        .and_then(|mut f| f.read_to_end(&mut bytes))
-        .with_context(|| format!("reading {}", path.display()))?;
     let mut events = Vec::new();
-    let mut rest = bytes.as_slice();
-    while !rest.is_empty() {
-        let record = events.len();
-        ensure!(
-            rest.len() >= 12,
-            "record {record}: truncated header ({} bytes left)",
-            rest.len()
-        );
-        let (len_bytes, tail) = rest.split_at(8);
-        let len_crc = u32::from_le_bytes(tail[..4].try_into()?);
-        ensure!(
-            masked_crc32c(len_bytes) == len_crc,
-            "record {record}: length CRC mismatch"
-        );
-        let len = usize::try_from(u64::from_le_bytes(len_bytes.try_into()?))?;
-        let tail = &tail[4..];
-        ensure!(
-            tail.len() >= len + 4,
-            "record {record}: truncated data ({len} bytes announced)"
-        );
-        let (data, tail) = tail.split_at(len);
-        let data_crc = u32::from_le_bytes(tail[..4].try_into()?);
-        ensure!(
-            masked_crc32c(data) == data_crc,
-            "record {record}: data CRC mismatch"
-        );
-        events.push(decode_event(data).with_context(|| format!("record {record}"))?);
-        rest = &tail[4..];
+    let mut problem = None;
+    scan_events(path, |_, event| match event {
+        Ok(event) => {
+            events.push(event);
+            true
+        }
+        Err(err) => {
+            problem = Some(err);
+            false
+        }
+    })?;
+    match problem {
+        Some(err) => Err(err),
+        None => Ok(events),
     }
-    Ok(events)
+}
+
+/// Streams the records of the event file at `path`, one at a time (files of long runs are
+/// large), calling `visit` with each record's byte offset and its event, or the problem with
+/// it (a truncated or corrupt record: the scan ends there); `visit` returns whether to go on.
+/// `Err` only when the file cannot be read.
+pub fn scan_events(
+    path: &Path,
+    mut visit: impl FnMut(u64, anyhow::Result<Event>) -> bool,
+) -> anyhow::Result<()> {
+    let file = File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut input = std::io::BufReader::new(file);
+    let (mut offset, mut record) = (0u64, 0usize);
+    let mut data = Vec::new();
+    loop {
+        let mut header = [0u8; 12];
+        let n = read_up_to(&mut input, &mut header)
+            .with_context(|| format!("reading {}", path.display()))?;
+        if n == 0 {
+            return Ok(());
+        }
+        let read = (|| {
+            ensure!(n == 12, "truncated header ({n} bytes left)");
+            let len_bytes: [u8; 8] = header[..8].try_into()?;
+            let len_crc = u32::from_le_bytes(header[8..].try_into()?);
+            ensure!(masked_crc32c(&len_bytes) == len_crc, "length CRC mismatch");
+            let len = usize::try_from(u64::from_le_bytes(len_bytes))?;
+            data.resize(len + 4, 0);
+            let got = read_up_to(&mut input, &mut data)?;
+            ensure!(got == len + 4, "truncated data ({len} bytes announced)");
+            let data_crc = u32::from_le_bytes(data[len..].try_into()?);
+            ensure!(masked_crc32c(&data[..len]) == data_crc, "data CRC mismatch");
+            Ok((len, decode_event(&data[..len])?))
+        })()
+        .with_context(|| format!("record {record}"));
+        let start = offset;
+        let event = match read {
+            Ok((len, event)) => {
+                offset += 12 + len as u64 + 4;
+                Ok(event)
+            }
+            Err(err) => Err(err),
+        };
+        let failed = event.is_err();
+        if !visit(start, event) || failed {
+            return Ok(());
+        }
+        record += 1;
+    }
+}
+
+/// Fills `buf` from `input` as far as the input goes; returns the bytes read.
+fn read_up_to(input: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match input.read(&mut buf[filled..])? {
+            0 => break,
+            n => filled += n,
+        }
+    }
+    Ok(filled)
 }
 
 /// A protobuf field as read: number and value.
-#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 enum Field<'a> {
     Varint(u64),
     Fixed64([u8; 8]),
@@ -258,7 +298,6 @@ enum Field<'a> {
     Fixed32([u8; 4]),
 }
 
-#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn take_varint(data: &mut &[u8]) -> anyhow::Result<u64> {
     let mut value = 0u64;
     for shift in (0..64).step_by(7) {
@@ -272,7 +311,6 @@ fn take_varint(data: &mut &[u8]) -> anyhow::Result<u64> {
     bail!("varint longer than 10 bytes")
 }
 
-#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn take<'a>(data: &mut &'a [u8], n: usize) -> anyhow::Result<&'a [u8]> {
     ensure!(
         data.len() >= n,
@@ -284,7 +322,6 @@ fn take<'a>(data: &mut &'a [u8], n: usize) -> anyhow::Result<&'a [u8]> {
     Ok(head)
 }
 
-#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn next_field<'a>(data: &mut &'a [u8]) -> anyhow::Result<(u64, Field<'a>)> {
     let key = take_varint(data)?;
     let field = match key & 7 {
@@ -300,7 +337,6 @@ fn next_field<'a>(data: &mut &'a [u8]) -> anyhow::Result<(u64, Field<'a>)> {
     Ok((key >> 3, field))
 }
 
-#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn decode_event(mut data: &[u8]) -> anyhow::Result<Event> {
     let mut event = Event::default();
     while !data.is_empty() {
@@ -315,7 +351,6 @@ fn decode_event(mut data: &[u8]) -> anyhow::Result<Event> {
     Ok(event)
 }
 
-#[cfg_attr(not(test), allow(dead_code))] // the reader checks files in tests
 fn decode_summary(mut data: &[u8], scalars: &mut Vec<(String, f32)>) -> anyhow::Result<()> {
     while !data.is_empty() {
         if let (1, Field::Bytes(mut value)) = next_field(&mut data)? {

@@ -1,6 +1,7 @@
 //! Resume system tests: the real `asi` binary on `configs/smoke.toml`, each run in its own
 //! folder with its own run id and a watchdog. A stopped run started again in the same folder
-//! resumes from its checkpoint (counters continue, nothing restarts from 0); a damaged
+//! resumes from its checkpoint (counters continue, nothing restarts from 0), also after a
+//! SIGKILL between checkpoints (what it wrote past the checkpoint is moved aside); a damaged
 //! graph-service checkpoint is refused and kept while the run resumes; a checkpoint of another
 //! config is refused before anything starts.
 
@@ -152,7 +153,12 @@ fn as_u64(v: &Value, key: &str) -> u64 {
 
 /// `learner/ingest/env_steps` of every metrics line, in file order.
 fn env_steps_per_line(dir: &Path) -> Vec<u64> {
-    std::fs::read_to_string(dir.join("metrics.jsonl"))
+    env_steps_in(&dir.join("metrics.jsonl"))
+}
+
+/// `learner/ingest/env_steps` of every line of the metrics file at `path`.
+fn env_steps_in(path: &Path) -> Vec<u64> {
+    std::fs::read_to_string(path)
         .unwrap_or_default()
         .lines()
         .filter_map(|l| serde_json::from_str::<Value>(l).ok())
@@ -286,6 +292,111 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     assert!(graph_after["refused_checkpoints"]
         .as_array()
         .is_some_and(Vec::is_empty));
+}
+
+#[test]
+fn a_run_killed_between_checkpoints_resumes_with_its_curves_cut_at_the_checkpoint() {
+    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = RunDir::new("killed");
+    // Checkpoints only at clean stops, so the killed launch leaves none of its own.
+    let no_interval = "run.checkpoint_interval_mins=600";
+    train_ok(
+        &dir,
+        &["--set", "run.max_episodes=6", "--set", no_interval],
+        "first launch",
+    );
+    let before = dir.status("learner");
+    let steps = as_u64(&before, "env_steps");
+    let lines_at_checkpoint = env_steps_per_line(&dir.0).len();
+
+    // A second launch with a large budget, SIGKILLed (launcher and every child) once it has
+    // written a few metrics lines past the checkpoint.
+    let dir_arg = dir.0.to_string_lossy().into_owned();
+    let budget = format!("run.max_episodes={}", as_u64(&before, "episodes") + 10_000);
+    let mut launcher = Command::new(env!("CARGO_BIN_EXE_asi"))
+        .args(["train", "--config", "configs/smoke.toml", "--actors", "2"])
+        .args([
+            "--run-dir",
+            &dir_arg,
+            "--set",
+            &budget,
+            "--set",
+            no_interval,
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("asi starts");
+    let start = Instant::now();
+    while env_steps_per_line(&dir.0)
+        .iter()
+        .filter(|&&s| s > steps)
+        .count()
+        < 3
+    {
+        if start.elapsed() > WATCHDOG || launcher.try_wait().unwrap().is_some() {
+            kill_children(&dir.0);
+            let _ = launcher.kill();
+            panic!("the second launch wrote no metrics past the checkpoint before it ended");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    launcher.kill().unwrap();
+    launcher.wait().unwrap();
+    kill_children(&dir.0);
+    assert_eq!(
+        dir.checkpoints(),
+        ["ckpt-000001"],
+        "the killed launch wrote none"
+    );
+    // The killed launch's lines past the checkpoint (its first ones may still show the
+    // checkpoint's env steps: those stay).
+    let all = env_steps_per_line(&dir.0);
+    assert!(all[..lines_at_checkpoint].iter().all(|&s| s <= steps));
+    let past = all.iter().filter(|&&s| s > steps).count();
+
+    // The resume moves what the killed launch wrote aside and writes that stretch again.
+    let budget = format!("run.max_episodes={}", as_u64(&before, "episodes") + 6);
+    let resumed = train_ok(&dir, &["--set", &budget, "--set", no_interval], "resume");
+    let stdout = String::from_utf8_lossy(&resumed.stdout);
+    assert!(
+        stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
+        "{stdout}"
+    );
+    for moved in [
+        format!("metrics.jsonl: {past} lines written after checkpoint 1"),
+        "metrics.csv: ".to_owned(),
+        "events written after checkpoint 1".to_owned(),
+    ] {
+        assert!(stdout.contains(&moved), "`{moved}` in {stdout}");
+    }
+    let lines = env_steps_per_line(&dir.0);
+    assert!(*lines.last().unwrap() > steps, "trained on: {lines:?}");
+    assert!(
+        lines.windows(2).all(|w| w[0] <= w[1]),
+        "env steps never go back along metrics.jsonl: {lines:?}"
+    );
+    let side_files: Vec<String> = names_in(&dir.0)
+        .into_iter()
+        .filter(|n| n.contains(".past-ckpt-1-"))
+        .collect();
+    assert!(
+        side_files.iter().any(|n| n.starts_with("metrics.jsonl."))
+            && side_files.iter().any(|n| n.starts_with("metrics.csv."))
+            && side_files.iter().any(|n| n.starts_with("tensorboard.")),
+        "{side_files:?}"
+    );
+    let jsonl_side = side_files
+        .iter()
+        .find(|n| n.starts_with("metrics.jsonl."))
+        .unwrap();
+    let moved = env_steps_in(&dir.0.join(jsonl_side));
+    assert!(
+        moved.len() == past && moved.iter().all(|&s| s > steps),
+        "{moved:?}"
+    );
 }
 
 /// Every file of a checkpoint folder, by name, with its bytes.

@@ -281,10 +281,11 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
             };
             for moved in crate::run::move_lines_past(&run_dir, point)? {
                 println!(
-                    "{}: {} lines written after checkpoint {} (a run stopped without a final \
+                    "{}: {} {} written after checkpoint {} (a run stopped without a final \
                      checkpoint) moved to {}; the resumed run writes that stretch again",
                     moved.file.display(),
                     moved.lines,
+                    moved.unit,
                     manifest.sequence,
                     moved.side_file.display()
                 );

@@ -6,6 +6,10 @@
 //! moves each file's lines past the checkpoint — and a last line left half-written — into a
 //! side file next to it (`<file>.past-ckpt-<N>-<unix seconds>`): nothing is deleted.
 //!
+//! TensorBoard event files (`tensorboard/`, process mode) are cut the same way, by each
+//! event's step (env steps); their tails go to a folder `tensorboard.past-ckpt-<N>-<unix
+//! seconds>/` (a file beside them would still be read as part of the run).
+//!
 //! A line is past the checkpoint when its learner env-step count is above the checkpoint's
 //! (`metrics.jsonl`: key `learner/ingest/env_steps`; `metrics.csv`: the column of that name),
 //! or, for `eval.jsonl`, when it evaluated weights of more training episodes than the
@@ -40,8 +44,11 @@ pub struct ResumePoint {
 pub struct MovedTail {
     /// The record file.
     pub file: PathBuf,
-    /// Whole lines moved (a half-written last line is moved too, not counted here).
+    /// Whole lines (event files: whole records) moved; a half-written last one is moved too,
+    /// not counted here.
     pub lines: u64,
+    /// What `lines` counts: "lines" or "events".
+    pub unit: &'static str,
     /// The side file that holds them.
     pub side_file: PathBuf,
 }
@@ -73,7 +80,90 @@ pub fn move_lines_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec
             Ok(json_number(line, "train_episodes").is_some_and(|e| e > episodes as f64))
         })?);
     }
+    moved.extend(move_events_past(run_dir, point)?);
     Ok(moved)
+}
+
+/// TensorBoard event files (process mode; one per launch, x axis env steps): the records past
+/// `point` (step above its env steps), or from a truncated or corrupt record on, move into
+/// `tensorboard.past-ckpt-N-<unix seconds>/` under the file's name — a folder TensorBoard
+/// shows as a run of its own, outside `tensorboard/`, whose curves then end at the checkpoint.
+fn move_events_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<MovedTail>> {
+    let dir = run_dir.join("tensorboard");
+    let entries = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(err) => return Err(err).with_context(|| format!("reading {}", dir.display())),
+    };
+    let mut files: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    let side_dir = run_dir.join(format!(
+        "tensorboard.past-ckpt-{}-{}",
+        point.sequence,
+        unix_secs()
+    ));
+    let mut moved = Vec::new();
+    for path in files {
+        // The first record past the point (or unreadable), and the whole records from it on.
+        let (mut cut, mut past) = (None, 0u64);
+        crate::tensorboard::scan_events(&path, |offset, event| {
+            let beyond = event
+                .as_ref()
+                .map_or(true, |e| e.step > point.env_steps as i64);
+            if beyond && cut.is_none() {
+                cut = Some(offset);
+            }
+            past += u64::from(cut.is_some() && event.is_ok());
+            true
+        })?;
+        let Some(at) = cut else { continue };
+        std::fs::create_dir_all(&side_dir)
+            .with_context(|| format!("creating {}", side_dir.display()))?;
+        let side_file = side_dir.join(path.file_name().unwrap_or_default());
+        split_off(&path, at, &side_file)?;
+        moved.push(MovedTail {
+            file: path,
+            lines: past,
+            unit: "events",
+            side_file,
+        });
+    }
+    Ok(moved)
+}
+
+fn unix_secs() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
+}
+
+/// Copies `path` from byte `at` on into the new file `side_file` (synced), then cuts `path`
+/// at `at`: a crash in between leaves the bytes in both places, never in neither.
+fn split_off(path: &Path, at: u64, side_file: &Path) -> anyhow::Result<()> {
+    let mut source = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    source.seek(SeekFrom::Start(at))?;
+    let mut side =
+        File::create_new(side_file).with_context(|| format!("creating {}", side_file.display()))?;
+    std::io::copy(&mut source, &mut side).with_context(|| {
+        format!(
+            "copying the tail of {} to {}",
+            path.display(),
+            side_file.display()
+        )
+    })?;
+    side.sync_all()?;
+    let record = File::options()
+        .write(true)
+        .open(path)
+        .with_context(|| format!("opening {} to cut it", path.display()))?;
+    record
+        .set_len(at)
+        .with_context(|| format!("cutting {} at byte {at}", path.display()))?;
+    Ok(record.sync_all()?)
 }
 
 /// The number at `key` in a JSON object line; `None` when the line is not one or lacks it.
@@ -120,35 +210,17 @@ fn move_tail(
     let name = path
         .file_name()
         .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    let unix = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let side_file = path.with_file_name(format!("{name}.past-ckpt-{}-{unix}", point.sequence));
-    // The side file is complete on disk before the record file is cut: a crash in between
-    // leaves the lines in both places, never in neither.
-    let mut source = reader.into_inner();
-    source.seek(SeekFrom::Start(at))?;
-    let mut side = File::create_new(&side_file)
-        .with_context(|| format!("creating {}", side_file.display()))?;
-    std::io::copy(&mut source, &mut side).with_context(|| {
-        format!(
-            "copying the tail of {} to {}",
-            path.display(),
-            side_file.display()
-        )
-    })?;
-    side.sync_all()?;
-    let record = File::options()
-        .write(true)
-        .open(path)
-        .with_context(|| format!("opening {} to cut it", path.display()))?;
-    record
-        .set_len(at)
-        .with_context(|| format!("cutting {} at byte {at}", path.display()))?;
-    record.sync_all()?;
+    let side_file = path.with_file_name(format!(
+        "{name}.past-ckpt-{}-{}",
+        point.sequence,
+        unix_secs()
+    ));
+    drop(reader);
+    split_off(path, at, &side_file)?;
     Ok(Some(MovedTail {
         file: path.to_path_buf(),
         lines: index - first,
+        unit: "lines",
         side_file,
     }))
 }
@@ -258,6 +330,61 @@ mod tests {
 
         // A second pass at the same point finds nothing more to move.
         assert_eq!(move_lines_past(&dir, point).unwrap(), []);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn tensorboard_events_past_the_checkpoint_move_to_a_folder_of_their_own() {
+        use crate::tensorboard::{read_events, EventWriter};
+        let dir = scratch("events");
+        let mut writer = EventWriter::create(&dir.join("tensorboard")).unwrap();
+        for step in [100, 200, 300, 400] {
+            writer
+                .add_scalars(step, 1.0, &[("a", step as f32)])
+                .unwrap();
+        }
+        writer.flush().unwrap();
+        let path = writer.path().to_path_buf();
+        drop(writer);
+        // A record half-written at the kill.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let whole = bytes.len();
+        bytes.extend_from_within(whole - 20..whole - 10);
+        std::fs::write(&path, &bytes).unwrap();
+
+        let point = ResumePoint {
+            sequence: 4,
+            env_steps: 250,
+            episodes: None,
+        };
+        let moved = move_lines_past(&dir, point).unwrap();
+        assert_eq!(moved.len(), 1);
+        assert_eq!(
+            (moved[0].file.as_path(), moved[0].lines, moved[0].unit),
+            (path.as_path(), 2, "events")
+        );
+        let steps =
+            |p: &Path| -> Vec<i64> { read_events(p).unwrap().iter().map(|e| e.step).collect() };
+        // The file version record (step 0) and the two events up to the checkpoint stay.
+        assert_eq!(steps(&path), [0, 100, 200]);
+        let side = &moved[0].side_file;
+        assert!(side
+            .parent()
+            .unwrap()
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("tensorboard.past-ckpt-4-"));
+        assert_eq!(side.file_name(), path.file_name());
+        let side_bytes = std::fs::read(side).unwrap();
+        assert_eq!(
+            side_bytes.len() + std::fs::metadata(&path).unwrap().len() as usize,
+            bytes.len()
+        );
+        assert!(format!("{:#}", read_events(side).unwrap_err()).contains("truncated"));
+        let readable = &side_bytes[..side_bytes.len() - 10];
+        std::fs::write(dir.join("readable"), readable).unwrap();
+        assert_eq!(steps(&dir.join("readable")), [300, 400]);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
