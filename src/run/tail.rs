@@ -53,8 +53,9 @@ pub struct MovedTail {
     pub side_file: PathBuf,
 }
 
-/// Moves the lines past `point` of the run's `metrics.jsonl`, `metrics.csv` and `eval.jsonl`
-/// into side files; returns what was moved (nothing for files that end at the checkpoint).
+/// Moves the lines past `point` of the run's `metrics.jsonl`, `metrics.csv` and `eval.jsonl`,
+/// and the events past it of its TensorBoard files, into side files; returns what was moved
+/// (nothing for files that end at the checkpoint).
 pub fn move_lines_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<MovedTail>> {
     const STEPS_KEY: &str = "learner/ingest/env_steps";
     let mut moved = Vec::new();
