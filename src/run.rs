@@ -24,7 +24,7 @@ use protocol::{Config, RunId};
 
 mod tail;
 
-pub use tail::{move_lines_past, ResumePoint};
+pub use tail::{move_lines_past, move_metrics_past, MovedTail, ResumePoint};
 
 /// File in the run folder holding the current run id (read by `asi graph` and tests).
 pub const RUN_ID_FILE: &str = "run_id";

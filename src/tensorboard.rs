@@ -22,7 +22,7 @@
 //! can check a file by reading it back; it rejects bad CRCs and truncated records with errors.
 
 use std::fs::File;
-use std::io::{BufWriter, Read, Write};
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -137,6 +137,18 @@ impl EventWriter {
         self.out
             .flush()
             .with_context(|| format!("writing {}", self.path.display()))
+    }
+
+    /// Flushes, then moves the write position to the file's current end: after the file was
+    /// cut shorter underneath the writer ([`crate::run::move_metrics_past`]), the next record
+    /// follows the last one kept instead of leaving a hole of zeros.
+    pub fn continue_at_end(&mut self) -> anyhow::Result<()> {
+        self.flush()?;
+        self.out
+            .get_mut()
+            .seek(SeekFrom::End(0))
+            .with_context(|| format!("seeking to the end of {}", self.path.display()))?;
+        Ok(())
     }
 
     fn write_record(&mut self, data: &[u8]) -> anyhow::Result<()> {

@@ -271,6 +271,7 @@ fn a_run_survives_sigkills_of_every_process_kind_and_loses_only_what_crashes_mus
     assert_eq!(as_u64(&learner, "rejected_chunks"), 0, "{learner}");
     check_restart_counts(&run.dir, &kills);
     check_learner_continuity(&kills, &learner);
+    check_metrics_follow_the_learner(&run.dir, &kills);
     check_losses(&run.dir, &kills, ingested);
     print_figures(&kills, wall_secs);
     let m = run.last_metrics();
@@ -358,6 +359,67 @@ fn check_learner_continuity(kills: &[Kill], learner: &Value) {
         );
         assert!(as_u64(learner, "env_steps") > restored);
     }
+}
+
+/// The learner env steps in `metrics.jsonl` and `metrics.csv` never go back although each
+/// restarted learner went back to its checkpoint: the launcher moved the lines written past
+/// it to side files (`metrics.jsonl.past-ckpt-N-…`), whose every line is past some restart's
+/// restored steps.
+fn check_metrics_follow_the_learner(dir: &Path, kills: &[Kill]) {
+    let steps_key = "learner/ingest/env_steps";
+    let jsonl_steps = |text: &str| -> Vec<f64> {
+        text.lines()
+            .filter_map(|l| {
+                serde_json::from_str::<Value>(l)
+                    .ok()?
+                    .get(steps_key)?
+                    .as_f64()
+            })
+            .collect()
+    };
+    let main = jsonl_steps(&std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap());
+    assert!(main.len() > 10, "metrics.jsonl has lines: {}", main.len());
+    if let Some(w) = main.windows(2).find(|w| w[1] < w[0]) {
+        panic!(
+            "metrics.jsonl goes back in env steps: {} then {}",
+            w[0], w[1]
+        );
+    }
+    let csv = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+    let column = csv
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == steps_key)
+        .expect("metrics.csv has the env steps column");
+    let csv_steps: Vec<f64> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(column).unwrap().parse().unwrap())
+        .collect();
+    if let Some(w) = csv_steps.windows(2).find(|w| w[1] < w[0]) {
+        panic!("metrics.csv goes back in env steps: {} then {}", w[0], w[1]);
+    }
+    let lowest_restore = kills
+        .iter()
+        .filter_map(|k| k.learner.as_ref())
+        .map(|r| as_u64(&r.start, "env_steps"))
+        .min()
+        .unwrap() as f64;
+    let mut moved = 0;
+    for entry in std::fs::read_dir(dir).unwrap().flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with("metrics.jsonl.past-ckpt-") {
+            let side = jsonl_steps(&std::fs::read_to_string(entry.path()).unwrap());
+            assert!(
+                side.iter().all(|&s| s > lowest_restore),
+                "{name}: {side:?} not past {lowest_restore}"
+            );
+            moved += side.len();
+        }
+    }
+    println!("metrics lines moved aside at learner restarts: {moved}");
 }
 
 fn check_losses(dir: &Path, kills: &[Kill], ingested: u64) {

@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal, Write};
+use std::io::{BufWriter, IsTerminal, Seek, SeekFrom, Write};
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
@@ -112,6 +112,38 @@ impl MetricsBook {
     pub fn forget_process(&mut self, process: &str) {
         let prefix = format!("{process}/");
         self.values.retain(|key, _| !key.starts_with(&prefix));
+    }
+
+    /// A learner restarted inside this launch went back to `point` (its newest checkpoint, or
+    /// the start): the lines and events already written past it move to side files
+    /// ([`crate::run::move_metrics_past`]), writing continues at the cut, and the learner's
+    /// counters stand at the checkpoint's until it reports, so the curves never go back in
+    /// env steps. Returns what was moved.
+    pub fn rewind_learner(
+        &mut self,
+        point: crate::run::ResumePoint,
+    ) -> anyhow::Result<Vec<crate::run::MovedTail>> {
+        self.jsonl.flush()?;
+        self.csv.flush()?;
+        self.tensorboard.flush()?;
+        let moved = crate::run::move_metrics_past(&self.run_dir, point)?;
+        for file in [self.jsonl.get_mut(), self.csv.get_mut()] {
+            file.seek(SeekFrom::End(0))?;
+        }
+        self.tensorboard.continue_at_end()?;
+        self.forget_process("learner");
+        self.values.insert(
+            "learner/ingest/env_steps".to_owned(),
+            point.env_steps as f64,
+        );
+        if let Some(episodes) = point.episodes {
+            self.values.insert(
+                "learner/ingest/episodes_completed".to_owned(),
+                episodes as f64,
+            );
+        }
+        self.rate = RateMeter::default();
+        Ok(moved)
     }
 
     /// `launcher/restarts_<family>`: restarts so far per process kind.
@@ -257,5 +289,95 @@ impl RateMeter {
             }
             _ => 0.0,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::run::ResumePoint;
+
+    fn learner_sample(name: &str, value: f64) -> MetricsSample {
+        MetricsSample::new(ProcessRole::Learner, 0, name, value, value as u64, 0).unwrap()
+    }
+
+    fn steps_of_jsonl(text: &str) -> Vec<f64> {
+        text.lines()
+            .map(|l| {
+                let v: serde_json::Value = serde_json::from_str(l).unwrap();
+                v["learner/ingest/env_steps"].as_f64().unwrap()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_restarted_learner_cuts_the_records_at_its_checkpoint_and_writing_goes_on_after_the_cut() {
+        let dir = std::env::temp_dir().join(format!("asi-book-rewind-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let ctx = RunContext {
+            config: Config::default(),
+            run_dir: dir.clone(),
+            run_id: protocol::RunId::new("t-1").unwrap(),
+            resume: false,
+            _lock: None,
+        };
+        // A fresh run: the files are opened without O_APPEND, so only the explicit move to
+        // the end keeps the writes after the cut from leaving a hole.
+        let mut book = MetricsBook::create(&ctx, false).unwrap();
+        let write = |book: &mut MetricsBook, steps: f64| {
+            book.record(&[
+                learner_sample("ingest/env_steps", steps),
+                learner_sample("ingest/episodes_completed", steps / 100.0),
+            ]);
+            book.flush(0).unwrap();
+        };
+        for steps in [100.0, 200.0, 300.0, 400.0, 500.0] {
+            write(&mut book, steps);
+        }
+        let point = ResumePoint {
+            sequence: Some(3),
+            env_steps: 300,
+            episodes: Some(3),
+        };
+        let moved = book.rewind_learner(point).unwrap();
+        let files: Vec<(String, u64)> = moved
+            .iter()
+            .map(|m| {
+                (
+                    m.file.file_name().unwrap().to_string_lossy().into_owned(),
+                    m.lines,
+                )
+            })
+            .collect();
+        assert_eq!(
+            files[..2],
+            [
+                ("metrics.jsonl".to_owned(), 2),
+                ("metrics.csv".to_owned(), 2)
+            ]
+        );
+        assert_eq!(files[2].1, 2, "{files:?}");
+        // Until the restarted learner reports, lines carry the checkpoint's counters.
+        book.flush(0).unwrap();
+        assert!(!book.budget_reached(&ctx.config));
+        for steps in [320.0, 360.0] {
+            write(&mut book, steps);
+        }
+        let jsonl = std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap();
+        assert_eq!(
+            steps_of_jsonl(&jsonl),
+            [100.0, 200.0, 300.0, 300.0, 320.0, 360.0]
+        );
+        let side = std::fs::read_to_string(&moved[0].side_file).unwrap();
+        assert_eq!(steps_of_jsonl(&side), [400.0, 500.0]);
+        let csv = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+        let column = |line: &str| line.split(',').nth(3).unwrap().to_owned();
+        let csv_steps: Vec<String> = csv.lines().skip(1).map(column).collect();
+        assert_eq!(csv_steps, ["100", "200", "300", "300", "320", "360"]);
+        let events = crate::tensorboard::read_events(book.tensorboard.path()).unwrap();
+        let steps: Vec<i64> = events.iter().map(|e| e.step).collect();
+        assert_eq!(steps, [0, 100, 200, 300, 300, 320, 360]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

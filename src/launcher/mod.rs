@@ -174,6 +174,9 @@ fn supervise(
             // for the restarted one's, e.g. a budget the restored learner has not reached yet.
             book.forget_process(&kind.name());
         }
+        if restarts.restarted.contains(&ChildKind::Learner) {
+            rewind_records(ctx, book);
+        }
         book.set_restarts(children.restarts_per_family());
         book.show_progress(children.total_restarts());
         if last_flush.elapsed() >= interval {
@@ -183,6 +186,42 @@ fn supervise(
         if children.services_running() && book.budget_reached(&ctx.config) {
             return Ok(Ending::BudgetReached);
         }
+    }
+}
+
+/// The restarted learner resumes from its newest checkpoint (or from nothing): the records
+/// written past that point move aside ([`MetricsBook::rewind_learner`]). A failure is logged
+/// and training goes on; the records then go back in env steps as they did before the cut.
+fn rewind_records(ctx: &RunContext, book: &mut MetricsBook) {
+    let point = match resume_point(&ctx.config, &ctx.run_dir) {
+        Ok(Some(manifest)) => crate::run::ResumePoint {
+            sequence: Some(manifest.sequence),
+            env_steps: manifest.env_steps,
+            episodes: manifest.episodes_completed,
+        },
+        Ok(None) => crate::run::ResumePoint::START,
+        Err(err) => {
+            tracing::error!(
+                "restarted learner: its checkpoint is unreadable here, metrics not cut: {err:#}"
+            );
+            return;
+        }
+    };
+    match book.rewind_learner(point) {
+        Ok(moved) => {
+            for m in moved {
+                tracing::warn!(
+                    "learner restarted from {} (env steps {}): {} {} of {} written after it moved to {}",
+                    point.sequence.map_or("the start".to_owned(), |n| format!("checkpoint {n}")),
+                    point.env_steps,
+                    m.lines,
+                    m.unit,
+                    m.file.display(),
+                    m.side_file.display()
+                );
+            }
+        }
+        Err(err) => tracing::error!("restarted learner: cutting the metrics files failed: {err:#}"),
     }
 }
 
@@ -275,7 +314,7 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
                 manifest.sequence, manifest.env_steps
             );
             let point = crate::run::ResumePoint {
-                sequence: manifest.sequence,
+                sequence: Some(manifest.sequence),
                 env_steps: manifest.env_steps,
                 episodes: manifest.episodes_completed,
             };

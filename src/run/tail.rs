@@ -8,7 +8,14 @@
 //!
 //! TensorBoard event files (`tensorboard/`, process mode) are cut the same way, by each
 //! event's step (env steps); their tails go to a folder `tensorboard.past-ckpt-<N>-<unix
-//! seconds>/` (a file beside them would still be read as part of the run).
+//! seconds>/` (a file beside them would still be read as part of the run). A side name that
+//! is taken (two cuts in one second) gets `-2`, `-3`, … appended.
+//!
+//! A process-mode learner that crashes and is restarted inside one launch goes back to its
+//! checkpoint the same way; the launcher then cuts its own records (`metrics.jsonl`,
+//! `metrics.csv`, its TensorBoard file: [`move_metrics_past`]) at that checkpoint, or at the
+//! start (`past-start`) when there was none. `eval.jsonl` stays: the evaluator keeps running
+//! and does not evaluate those episode counts again.
 //!
 //! A line is past the checkpoint when its learner env-step count is above the checkpoint's
 //! (`metrics.jsonl`: key `learner/ingest/env_steps`; `metrics.csv`: the column of that name),
@@ -31,12 +38,29 @@ use anyhow::Context;
 /// Where a resume starts: the learner checkpoint's sequence number and counters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ResumePoint {
-    /// N of `ckpt-N` (names the side files).
-    pub sequence: u64,
+    /// N of `ckpt-N` (names the side files); `None`: no checkpoint, the learner starts over.
+    pub sequence: Option<u64>,
     /// Env steps the learner had ingested.
     pub env_steps: u64,
     /// Episodes it had completed, when the checkpoint records them.
     pub episodes: Option<u64>,
+}
+
+impl ResumePoint {
+    /// The learner's start without a checkpoint: every counted line is past it.
+    pub const START: Self = Self {
+        sequence: None,
+        env_steps: 0,
+        episodes: Some(0),
+    };
+
+    /// The middle of the side files' names: `past-ckpt-N` or `past-start`.
+    fn side_label(&self) -> String {
+        match self.sequence {
+            Some(n) => format!("past-ckpt-{n}"),
+            None => "past-start".to_owned(),
+        }
+    }
 }
 
 /// One file's lines moved aside.
@@ -57,6 +81,19 @@ pub struct MovedTail {
 /// and the events past it of its TensorBoard files, into side files; returns what was moved
 /// (nothing for files that end at the checkpoint).
 pub fn move_lines_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<MovedTail>> {
+    let mut moved = move_metrics_past(run_dir, point)?;
+    if let Some(episodes) = point.episodes {
+        let eval = run_dir.join("eval.jsonl");
+        moved.extend(move_tail(&eval, point, |line, _| {
+            Ok(json_number(line, "train_episodes").is_some_and(|e| e > episodes as f64))
+        })?);
+    }
+    Ok(moved)
+}
+
+/// [`move_lines_past`] for the launcher's own records only (`metrics.jsonl`, `metrics.csv`,
+/// TensorBoard), not `eval.jsonl`: what a learner restarted inside a launch makes stale.
+pub fn move_metrics_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<MovedTail>> {
     const STEPS_KEY: &str = "learner/ingest/env_steps";
     let mut moved = Vec::new();
     let jsonl = run_dir.join("metrics.jsonl");
@@ -75,12 +112,6 @@ pub fn move_lines_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec
             .and_then(|field| field.parse::<f64>().ok())
             .is_some_and(|s| s > point.env_steps as f64))
     })?);
-    if let Some(episodes) = point.episodes {
-        let eval = run_dir.join("eval.jsonl");
-        moved.extend(move_tail(&eval, point, |line, _| {
-            Ok(json_number(line, "train_episodes").is_some_and(|e| e > episodes as f64))
-        })?);
-    }
     moved.extend(move_events_past(run_dir, point)?);
     Ok(moved)
 }
@@ -102,11 +133,7 @@ fn move_events_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<Mo
         .filter(|p| p.is_file())
         .collect();
     files.sort();
-    let side_dir = run_dir.join(format!(
-        "tensorboard.past-ckpt-{}-{}",
-        point.sequence,
-        unix_secs()
-    ));
+    let mut side_dir = None;
     let mut moved = Vec::new();
     for path in files {
         // The first record past the point (or unreadable), and the whole records from it on.
@@ -122,8 +149,15 @@ fn move_events_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<Mo
             true
         })?;
         let Some(at) = cut else { continue };
-        std::fs::create_dir_all(&side_dir)
-            .with_context(|| format!("creating {}", side_dir.display()))?;
+        let side_dir = match &side_dir {
+            Some(dir) => dir,
+            None => {
+                let name = format!("tensorboard.{}-{}", point.side_label(), unix_secs());
+                let dir = unused_name(&run_dir.join(name));
+                std::fs::create_dir(&dir).with_context(|| format!("creating {}", dir.display()))?;
+                side_dir.insert(dir)
+            }
+        };
         let side_file = side_dir.join(path.file_name().unwrap_or_default());
         split_off(&path, at, &side_file)?;
         moved.push(MovedTail {
@@ -134,6 +168,21 @@ fn move_events_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<Mo
         });
     }
     Ok(moved)
+}
+
+/// `path`, or when something is there already, the first of `path-2`, `path-3`, … that is
+/// free (the caller still creates it exclusively).
+fn unused_name(path: &Path) -> PathBuf {
+    let taken = |p: &Path| std::fs::symlink_metadata(p).is_ok();
+    let mut candidate = path.to_path_buf();
+    let mut n = 2u64;
+    while taken(&candidate) {
+        let mut name = path.as_os_str().to_owned();
+        name.push(format!("-{n}"));
+        candidate = PathBuf::from(name);
+        n += 1;
+    }
+    candidate
 }
 
 fn unix_secs() -> u64 {
@@ -211,11 +260,8 @@ fn move_tail(
     let name = path
         .file_name()
         .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    let side_file = path.with_file_name(format!(
-        "{name}.past-ckpt-{}-{}",
-        point.sequence,
-        unix_secs()
-    ));
+    let side_file =
+        unused_name(&path.with_file_name(format!("{name}.{}-{}", point.side_label(), unix_secs())));
     drop(reader);
     split_off(path, at, &side_file)?;
     Ok(Some(MovedTail {
@@ -276,7 +322,7 @@ mod tests {
         std::fs::write(dir.join("eval.jsonl"), eval).unwrap();
 
         let point = ResumePoint {
-            sequence: 7,
+            sequence: Some(7),
             env_steps: 300,
             episodes: Some(100),
         };
@@ -354,7 +400,7 @@ mod tests {
         std::fs::write(&path, &bytes).unwrap();
 
         let point = ResumePoint {
-            sequence: 4,
+            sequence: Some(4),
             env_steps: 250,
             episodes: None,
         };
@@ -395,7 +441,7 @@ mod tests {
         let eval = "{\"index\":1,\"train_episodes\":50}\n{\"index\":2,\"train_episodes\":100}\n";
         std::fs::write(dir.join("eval.jsonl"), eval).unwrap();
         let point = ResumePoint {
-            sequence: 2,
+            sequence: Some(2),
             env_steps: 10,
             episodes: None,
         };
@@ -422,6 +468,53 @@ mod tests {
         assert_eq!(
             std::fs::read_to_string(&moved[0].side_file).unwrap(),
             "{\"learner/in"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_taken_side_name_gets_a_number_and_a_cut_at_the_start_leaves_eval_alone() {
+        let dir = scratch("names");
+        let base = dir.join("metrics.jsonl.past-start-5");
+        assert_eq!(unused_name(&base), base);
+        std::fs::write(&base, "").unwrap();
+        assert_eq!(unused_name(&base), dir.join("metrics.jsonl.past-start-5-2"));
+        std::fs::write(dir.join("metrics.jsonl.past-start-5-2"), "").unwrap();
+        assert_eq!(unused_name(&base), dir.join("metrics.jsonl.past-start-5-3"));
+        std::fs::remove_file(&base).unwrap();
+        std::fs::remove_file(dir.join("metrics.jsonl.past-start-5-2")).unwrap();
+
+        // A learner restarted without a checkpoint starts over: every counted line goes, twice
+        // in a row (the second cut's side file must not collide with the first's, even
+        // within one second); eval.jsonl is not the launcher's and stays.
+        let eval = "{\"index\":1,\"train_episodes\":50}\n";
+        std::fs::write(dir.join("eval.jsonl"), eval).unwrap();
+        let mut side = Vec::new();
+        for steps in [[10, 20], [5, 15]] {
+            let lines = format!(
+                "{{\"wall_secs\":0}}\n{{\"learner/ingest/env_steps\":{}}}\n{{\"learner/ingest/env_steps\":{}}}\n",
+                steps[0], steps[1]
+            );
+            std::fs::write(dir.join("metrics.jsonl"), lines).unwrap();
+            let moved = move_metrics_past(&dir, ResumePoint::START).unwrap();
+            assert_eq!(moved.len(), 1);
+            assert_eq!(moved[0].lines, 2);
+            assert!(moved[0]
+                .side_file
+                .to_string_lossy()
+                .contains(".past-start-"));
+            side.push(moved[0].side_file.clone());
+            assert_eq!(
+                std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap(),
+                "{\"wall_secs\":0}\n"
+            );
+        }
+        assert_ne!(side[0], side[1]);
+        assert!(std::fs::read_to_string(&side[0]).unwrap().contains(":20}"));
+        assert!(std::fs::read_to_string(&side[1]).unwrap().contains(":15}"));
+        assert_eq!(
+            std::fs::read_to_string(dir.join("eval.jsonl")).unwrap(),
+            eval
         );
         std::fs::remove_dir_all(&dir).unwrap();
     }
