@@ -5,13 +5,33 @@ use std::path::{Path, PathBuf};
 use protocol::config::{FrProbStep, FutureCountAveraging, LowAlgo, NodePosition};
 use protocol::{Config, ConfigError, ConfigErrors};
 
-/// Writes `text` to a fresh file in the target temp dir and returns its path.
-fn temp_toml(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("asi-protocol-tests-{}", std::process::id()));
+/// A TOML file in a fresh folder of the system temp dir, removed with the folder on drop
+/// (also when the test fails).
+struct TempToml {
+    dir: PathBuf,
+    path: PathBuf,
+}
+
+impl TempToml {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for TempToml {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Writes `text` to `name` in a folder of its own (tests run in parallel).
+fn temp_toml(name: &str, text: &str) -> TempToml {
+    let dir =
+        std::env::temp_dir().join(format!("asi-protocol-tests-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("create temp dir");
     let path = dir.join(name);
     std::fs::write(&path, text).expect("write temp toml");
-    path
+    TempToml { dir, path }
 }
 
 fn invalid(result: Result<Config, ConfigError>) -> ConfigErrors {
@@ -36,7 +56,7 @@ fn defaults_validate() {
 
 #[test]
 fn unknown_key_wrong_type_and_out_of_range_are_reported_together() {
-    let path = temp_toml(
+    let toml = temp_toml(
         "bad.toml",
         r#"
 [run]
@@ -53,7 +73,10 @@ algo = "ppo"
 x = 1
 "#,
     );
-    let errors = invalid(Config::load(Some(&path), &sets(&["graph.cell_size=-2"])));
+    let errors = invalid(Config::load(
+        Some(toml.path()),
+        &sets(&["graph.cell_size=-2"]),
+    ));
     for path in [
         "run.nmae",
         "learner.high.batch_size",
@@ -100,12 +123,12 @@ fn validate_lists_every_problem_with_its_value() {
 
 #[test]
 fn set_overrides_beat_the_file_which_beats_defaults() {
-    let path = temp_toml(
+    let toml = temp_toml(
         "precedence.toml",
         "[learner.high]\ngamma = 0.95\nlr = 1e-3\n[hierarchy]\nc = 10\n",
     );
     let config = Config::load(
-        Some(&path),
+        Some(toml.path()),
         &sets(&["learner.high.gamma=0.9", "env.task=antmaze-s"]),
     )
     .expect("valid");
@@ -186,8 +209,8 @@ fn wrong_type_in_override_names_the_path() {
 
 #[test]
 fn toml_syntax_errors_name_the_file() {
-    let path = temp_toml("syntax.toml", "[run\nname = 1\n");
-    match Config::load(Some(&path), &[]) {
+    let toml = temp_toml("syntax.toml", "[run\nname = 1\n");
+    match Config::load(Some(toml.path()), &[]) {
         Err(ConfigError::Syntax { origin, .. }) => assert!(origin.contains("syntax.toml")),
         other => panic!("expected Syntax error, got {other:?}"),
     }
