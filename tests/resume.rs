@@ -292,6 +292,17 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     assert!(graph_after["refused_checkpoints"]
         .as_array()
         .is_some_and(Vec::is_empty));
+    // The resumed evaluator went on after the first launch's evaluations: no index twice.
+    let indices: Vec<u64> = std::fs::read_to_string(dir.0.join("eval.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .map(|l| as_u64(&serde_json::from_str(l).unwrap(), "index"))
+        .collect();
+    assert!(
+        indices.windows(2).all(|w| w[0] < w[1]),
+        "evaluation indices only grow: {indices:?}"
+    );
+    println!("evaluations over both launches: {indices:?}");
 }
 
 #[test]

@@ -10,6 +10,12 @@
 //! An evaluation is done on the newest weights at the moment it falls due; when the learner
 //! crosses several multiples at once (a slow evaluator), the skipped ones are counted, not
 //! queued, so evaluation never holds training back.
+//!
+//! A restarted evaluator (after its own crash, or in a resumed run) goes on after the last
+//! evaluation in `eval.jsonl` ([`evaluations_done`]): it does not evaluate the restored weights
+//! at once under an index that is already there, nor count the earlier ones as skipped. On a
+//! resume the launch has already moved the evaluations past the checkpoint out of the file
+//! (`crate::run::tail`), so those are run again as the resumed learner passes them.
 
 use std::fs::OpenOptions;
 use std::io::Write;
@@ -42,6 +48,14 @@ impl EvalSchedule {
             interval: interval.max(1),
             done: 0,
             skipped: 0,
+        }
+    }
+
+    /// A schedule whose evaluations `1..=done` have already been run.
+    pub fn after(interval: u64, done: u64) -> Self {
+        Self {
+            done,
+            ..Self::new(interval)
         }
     }
 
@@ -84,7 +98,15 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         config,
     );
     let stop = StopWatch::new();
-    let mut schedule = EvalSchedule::new(config.eval.interval_episodes);
+    let eval_file = ctx.run_dir.join(EVAL_FILE);
+    let done = evaluations_done(&eval_file)?;
+    if done > 0 {
+        tracing::info!(
+            "evaluations continue after evaluation {done} in {}",
+            eval_file.display()
+        );
+    }
+    let mut schedule = EvalSchedule::after(config.eval.interval_episodes, done);
     let plots = ctx.run_dir.join("plots");
     std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
     let mut n_rejected = 0u64;
@@ -178,12 +200,35 @@ pub fn eval_metrics(
 }
 
 /// One JSON line per evaluation in `run_dir/eval.jsonl`.
+/// The evaluation record of a run, in its folder.
+pub const EVAL_FILE: &str = "eval.jsonl";
+
+/// The highest evaluation `index` in `path` (an `eval.jsonl`), 0 when the file is missing or
+/// holds none. Lines that do not parse (a last line cut short by a crash) are skipped.
+pub fn evaluations_done(path: &std::path::Path) -> anyhow::Result<u64> {
+    use std::io::BufRead;
+    let file = match std::fs::File::open(path) {
+        Ok(file) => file,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+        Err(err) => return Err(err).with_context(|| format!("opening {}", path.display())),
+    };
+    let mut done = 0;
+    for line in std::io::BufReader::new(file).lines() {
+        let line = line.with_context(|| format!("reading {}", path.display()))?;
+        let index = serde_json::from_str::<serde_json::Value>(&line)
+            .ok()
+            .and_then(|v| v.get("index")?.as_u64());
+        done = done.max(index.unwrap_or(0));
+    }
+    Ok(done)
+}
+
 pub fn append_report(
     ctx: &RunContext,
     report: &EvalReport,
     header: &WeightsHeader,
 ) -> anyhow::Result<()> {
-    let path = ctx.run_dir.join("eval.jsonl");
+    let path = ctx.run_dir.join(EVAL_FILE);
     let mut file = OpenOptions::new()
         .create(true)
         .append(true)
@@ -219,5 +264,31 @@ mod tests {
         assert_eq!(s.due(260), Some(5));
         assert_eq!(s.skipped(), 2);
         assert_eq!(s.due(260), None);
+    }
+
+    #[test]
+    fn a_restarted_evaluator_goes_on_after_the_last_evaluation_in_its_file() {
+        let dir = std::env::temp_dir().join(format!("asi-eval-done-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(EVAL_FILE);
+        assert_eq!(evaluations_done(&path).unwrap(), 0, "no file yet");
+        std::fs::write(
+            &path,
+            "{\"index\":1,\"train_episodes\":50}\n{\"index\":4,\"train_episodes\":200}\n\
+             {\"index\":3,\"train_episodes\":150}\n{\"index\":5,\"train",
+        )
+        .unwrap();
+        let done = evaluations_done(&path).unwrap();
+        assert_eq!(
+            done, 4,
+            "the highest whole line's index; the cut-off line is skipped"
+        );
+        // Restored weights at 244 episodes: evaluation 4 is in the file already.
+        let mut s = EvalSchedule::after(50, done);
+        assert_eq!(s.due(244), None);
+        assert_eq!(s.due(250), Some(5));
+        assert_eq!(s.skipped(), 0);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -83,7 +83,7 @@ pub struct MovedTail {
 pub fn move_lines_past(run_dir: &Path, point: ResumePoint) -> anyhow::Result<Vec<MovedTail>> {
     let mut moved = move_metrics_past(run_dir, point)?;
     if let Some(episodes) = point.episodes {
-        let eval = run_dir.join("eval.jsonl");
+        let eval = run_dir.join(crate::proc::evaluator::EVAL_FILE);
         moved.extend(move_tail(&eval, point, |line, _| {
             Ok(json_number(line, "train_episodes").is_some_and(|e| e > episodes as f64))
         })?);
