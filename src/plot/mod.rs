@@ -70,50 +70,140 @@ impl Band {
     }
 }
 
-/// Reads `metric` against `x_key` from `run_dir/metrics.jsonl`. Points are kept in file order
-/// with x non-decreasing (a point whose x goes back is dropped) and the last value kept for
-/// repeated x; non-finite values are skipped. A last line without its newline that is not
-/// JSON is one a running writer has not finished: it is skipped, any other bad line is an error.
+/// Reads `metric` against `x_key` from `run_dir/metrics.jsonl` ([`read_series_of`] for one
+/// metric).
+#[cfg(test)]
 pub fn read_series(run_dir: &Path, x_key: &str, metric: &str) -> anyhow::Result<Series> {
+    let mut one = read_series_of(run_dir, x_key, &[metric.to_owned()])?;
+    Ok(one.pop().expect("one series per metric"))
+}
+
+/// Reads each of `metrics` against `x_key` from `run_dir/metrics.jsonl`, in one streamed pass
+/// that keeps only the wanted keys of each line (a week-long process-mode run writes hundreds
+/// of MB, and the launcher redraws its curves every minute). Points are kept in file order
+/// with x non-decreasing (a point whose x goes back is dropped) and the last value kept for
+/// repeated x; non-finite and non-numeric values are skipped, as are lines that are not JSON
+/// objects. A last line without its newline that is not JSON is one a running writer has not
+/// finished: it is skipped, any other bad line is an error.
+pub fn read_series_of(
+    run_dir: &Path,
+    x_key: &str,
+    metrics: &[String],
+) -> anyhow::Result<Vec<Series>> {
+    use std::io::BufRead;
     let path = run_dir.join("metrics.jsonl");
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let mut series = Series {
-        x: Vec::new(),
-        y: Vec::new(),
-    };
-    let n_lines = text.lines().count();
-    for (i, line) in text.lines().enumerate() {
+    let file = std::fs::File::open(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
+    let mut series = vec![
+        Series {
+            x: Vec::new(),
+            y: Vec::new(),
+        };
+        metrics.len()
+    ];
+    let mut wanted = WantedKeys::new(x_key, metrics);
+    let mut line = String::new();
+    let mut number = 0usize;
+    loop {
+        line.clear();
+        let n = reader
+            .read_line(&mut line)
+            .with_context(|| format!("reading {}", path.display()))?;
+        if n == 0 {
+            break;
+        }
+        number += 1;
         if line.trim().is_empty() {
             continue;
         }
-        let value: serde_json::Value = match serde_json::from_str(line) {
-            Ok(value) => value,
-            Err(_) if i + 1 == n_lines && !text.ends_with('\n') => break,
+        wanted.clear();
+        let parsed = if line.trim_start().starts_with('{') {
+            let mut de = serde_json::Deserializer::from_str(&line);
+            serde::de::DeserializeSeed::deserialize(&mut wanted, &mut de).and_then(|()| de.end())
+        } else {
+            // Other JSON values hold no keys; they are checked, not read.
+            serde_json::from_str::<serde::de::IgnoredAny>(&line).map(|_| ())
+        };
+        match parsed {
+            Ok(()) => {}
+            Err(_) if !line.ends_with('\n') => break,
             Err(err) => {
                 return Err(err)
-                    .with_context(|| format!("{}: line {} is not JSON", path.display(), i + 1))
+                    .with_context(|| format!("{}: line {number} is not JSON", path.display()))
             }
-        };
-        let (Some(x), Some(y)) = (
-            value.get(x_key).and_then(|v| v.as_f64()),
-            value.get(metric).and_then(|v| v.as_f64()),
-        ) else {
-            continue;
-        };
-        if !(x.is_finite() && y.is_finite()) {
-            continue;
         }
-        match series.x.last() {
-            Some(&last) if x < last => continue,
-            Some(&last) if x == last => *series.y.last_mut().expect("same length") = y,
-            _ => {
-                series.x.push(x);
-                series.y.push(y);
+        let Some(x) = wanted.values[0].filter(|x| x.is_finite()) else {
+            continue;
+        };
+        for (series, y) in series.iter_mut().zip(&wanted.values[1..]) {
+            let Some(y) = y.filter(|y| y.is_finite()) else {
+                continue;
+            };
+            match series.x.last() {
+                Some(&last) if x < last => {}
+                Some(&last) if x == last => *series.y.last_mut().expect("same length") = y,
+                _ => {
+                    series.x.push(x);
+                    series.y.push(y);
+                }
             }
         }
     }
     Ok(series)
+}
+
+/// The keys [`read_series_of`] wants from a line (`keys[0]` the x key) and their values in
+/// the line just read: a serde seed that walks one JSON object, reads the wanted keys' values
+/// as numbers (`None` when absent or not a number; the last one of a repeated key counts)
+/// and skips everything else without building it.
+struct WantedKeys {
+    keys: Vec<String>,
+    values: Vec<Option<f64>>,
+}
+
+impl WantedKeys {
+    fn new(x_key: &str, metrics: &[String]) -> Self {
+        let keys: Vec<String> = std::iter::once(x_key.to_owned())
+            .chain(metrics.iter().cloned())
+            .collect();
+        let values = vec![None; keys.len()];
+        Self { keys, values }
+    }
+
+    fn clear(&mut self) {
+        self.values.iter_mut().for_each(|v| *v = None);
+    }
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for &mut WantedKeys {
+    type Value = ();
+
+    fn deserialize<D: serde::Deserializer<'de>>(self, deserializer: D) -> Result<(), D::Error> {
+        deserializer.deserialize_map(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for &mut WantedKeys {
+    type Value = ();
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a JSON object of metrics")
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        while let Some(key) = map.next_key::<std::borrow::Cow<'de, str>>()? {
+            match self.keys.iter().position(|k| *k == key) {
+                Some(i) => {
+                    let value: serde_json::Value = map.next_value()?;
+                    self.values[i] = value.as_f64();
+                }
+                None => {
+                    map.next_value::<serde::de::IgnoredAny>()?;
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The arm of a run directory: its name without a trailing seed tag.
@@ -264,12 +354,17 @@ pub fn build_figure(
     }
     let mut arms = Vec::new();
     for arm in order {
+        // Each run's file is read once, for every metric.
+        let mut per_run = by_arm[&arm]
+            .iter()
+            .map(|d| read_series_of(d, x_key, metrics).map(Vec::into_iter))
+            .collect::<anyhow::Result<Vec<_>>>()?;
         let mut bands = Vec::new();
-        for metric in metrics {
-            let series = by_arm[&arm]
-                .iter()
-                .map(|d| read_series(d, x_key, metric))
-                .collect::<anyhow::Result<Vec<_>>>()?;
+        for _ in metrics {
+            let series: Vec<Series> = per_run
+                .iter_mut()
+                .map(|run| run.next().expect("one series per metric"))
+                .collect();
             bands.push(aggregate(&series));
         }
         arms.push((arm, bands));
@@ -538,6 +633,68 @@ mod tests {
         ] {
             assert_eq!(arm_name(Path::new(dir)), arm, "{dir}");
         }
+    }
+
+    #[test]
+    fn one_pass_reads_every_metric_as_a_full_parse_would() {
+        let dir = std::env::temp_dir().join(format!("asi-plot-one-pass-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // Nested values, strings, escaped keys, a repeated key (the last counts), null, a
+        // non-object line, x going back, a missing metric, and keys in any order.
+        let text = concat!(
+            "{\"x\": 1, \"a\": 0.5, \"nested\": {\"a\": 9, \"x\": 9}, \"s\": \"x\"}\n",
+            "{\"b\": 7, \"x\": 2, \"a\": 0.25, \"a\": 0.75, \"list\": [1, {\"b\": 3}]}\n",
+            "[1, 2, 3]\n",
+            "{\"x\": 3, \"a\": null, \"b\": \"8\", \"\\u0062\": 8}\n",
+            "{\"x\": 2.5, \"a\": 1, \"b\": 1}\n",
+            "{\"x\": 4, \"b\": true}\n",
+            "\n",
+            "{\"a\": 3}\n",
+            "{\"x\": 5, \"a\": 2, \"b\": 10}\n",
+        );
+        std::fs::write(dir.join("metrics.jsonl"), text).unwrap();
+        let metrics = ["a".to_owned(), "b".to_owned(), "c".to_owned()];
+        let got = read_series_of(&dir, "x", &metrics).unwrap();
+        // What a full parse of every line into a serde_json::Value gives.
+        let expected: Vec<Series> = metrics
+            .iter()
+            .map(|m| {
+                let mut s = Series {
+                    x: Vec::new(),
+                    y: Vec::new(),
+                };
+                for line in text.lines().filter(|l| !l.trim().is_empty()) {
+                    let v: serde_json::Value = serde_json::from_str(line).unwrap();
+                    let (Some(x), Some(y)) = (
+                        v.get("x").and_then(|v| v.as_f64()),
+                        v.get(m.as_str()).and_then(|v| v.as_f64()),
+                    ) else {
+                        continue;
+                    };
+                    if !(x.is_finite() && y.is_finite()) || s.x.last().is_some_and(|&l| x < l) {
+                        continue;
+                    }
+                    if s.x.last() == Some(&x) {
+                        *s.y.last_mut().unwrap() = y;
+                    } else {
+                        s.x.push(x);
+                        s.y.push(y);
+                    }
+                }
+                s
+            })
+            .collect();
+        assert_eq!(got, expected);
+        assert_eq!(
+            (got[0].x.clone(), got[0].y.clone()),
+            (vec![1.0, 2.0, 2.5, 5.0], vec![0.5, 0.75, 1.0, 2.0])
+        );
+        assert_eq!(
+            (got[1].x.clone(), got[1].y.clone()),
+            (vec![2.0, 3.0, 5.0], vec![7.0, 8.0, 10.0])
+        );
+        assert!(got[2].x.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
