@@ -265,9 +265,28 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     assert!(std::fs::read(dir.0.join("metrics.jsonl")).unwrap() == metrics_before);
     assert_eq!(dir.status("learner"), before, "no learner ran");
 
+    // Each actor took its share of the random warm-up (smoke: 2 episodes over 2 actors).
+    for actor in 0..2 {
+        let first = dir.status(&format!("actor-{actor}-0"));
+        assert!(as_u64(&first, "random_decisions") > 0, "{first}");
+    }
+
     // The first launch overshoots its budget while it stops; give the second 6 more episodes.
     let episodes = as_u64(&before, "episodes");
     let after = resume_six_more(&dir, &before, &[]);
+    // The resumed launch's actors are their second starts in the folder: fresh episode ids
+    // and env seeds, and no second random warm-up (before, both started again at episode 0).
+    for actor in 0..2 {
+        let second = dir.status(&format!("actor-{actor}-1"));
+        assert!(as_u64(&second, "published_steps") > 0, "{second}");
+        assert_eq!(as_u64(&second, "random_decisions"), 0, "{second}");
+    }
+    let starts: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.0.join("process_starts.json")).unwrap())
+            .unwrap();
+    for process in ["actor-0", "actor-1", "learner", "graph-service"] {
+        assert_eq!(as_u64(&starts, process), 2, "{process}: {starts}");
+    }
     assert!(
         as_u64(&after, "episodes") >= episodes + 6,
         "the budget counts both launches: {after}"

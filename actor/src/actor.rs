@@ -48,7 +48,7 @@ use crate::frontier::{
 use crate::networks::ActorNets;
 use crate::oracle::GraphOracle;
 use crate::record::RecordWriter;
-use crate::seeds::{actor_rng_seed, env_seed, episode_id};
+use crate::seeds::{actor_rng_seed, actor_rng_seed_from, env_seed, episode_id};
 use crate::subgoal::{ExploreGate, SubgoalPlan, SubgoalSource};
 
 /// Consecutive episodes without a single recorded step after which [`Actor::next_chunk`] gives up
@@ -91,6 +91,9 @@ pub struct ActorStats {
     pub n_decisions: u64,
     /// Decisions that took the graph-service's HESS explore subgoal.
     pub n_explore_decisions: u64,
+    /// Decisions that took a uniform random subgoal (the warm-up, SPEC §6.2).
+    #[serde(default)]
+    pub n_random_decisions: u64,
     /// Decisions that asked for an explore subgoal and got no answer (the policy, or the random
     /// warm-up source, decided instead).
     pub n_explore_fallbacks: u64,
@@ -130,6 +133,16 @@ pub struct ActorStats {
     /// `episodes` when that FR episode finished (tells which episode `last_fr_end` is).
     #[serde(default)]
     pub last_fr_episode: u64,
+}
+
+/// This actor's share of the run's random warm-up: `learner.high.random_episodes` counts the
+/// run's first training episodes (SPEC §6.2: "the first 300 training episodes"), which the
+/// `run.n_actors` actors run side by side, so each takes its first ⌈random_episodes /
+/// n_actors⌉ (one actor: all of them). Before, every actor took all of them: 14 actors on a
+/// 16-core machine ran 4,200 random episodes instead of 300.
+pub fn random_episodes_per_actor(config: &Config) -> u64 {
+    let actors = u64::try_from(config.run.n_actors.max(1)).unwrap_or(u64::MAX);
+    config.learner.high.random_episodes.div_ceil(actors)
 }
 
 /// One actor: an environment, the actor-side networks, and the episode in progress.
@@ -224,7 +237,7 @@ impl Actor {
             actor_id,
             seed,
             chunk_steps,
-            random_episodes: config.learner.high.random_episodes,
+            random_episodes: random_episodes_per_actor(config),
             explore_start_episode: config.exploration.explore_start_episode,
             far_goal_fraction: config.exploration.far_goal_fraction,
             n_episodes_started: 0,
@@ -241,6 +254,7 @@ impl Actor {
                 schedule: RunSchedule::START,
                 n_decisions: 0,
                 n_explore_decisions: 0,
+                n_random_decisions: 0,
                 n_explore_fallbacks: 0,
                 n_reach_reports: 0,
                 n_reach_samples_sent: 0,
@@ -569,10 +583,12 @@ impl Actor {
         Ok(())
     }
 
-    /// Makes the next episode the `episode`-th of this actor (its id, env seed and schedule
-    /// position follow from it). A restarted actor process starts at a fresh range
-    /// (e.g. `incarnation << 28`) so its episode ids never repeat ids the learner has seen.
-    /// Only allowed before the first episode starts.
+    /// Makes the next episode the `episode`-th of this actor (its id, env seed and position in
+    /// the random warm-up follow from it) and, for `episode > 0`, gives its generator a stream
+    /// of its own ([`crate::seeds::actor_rng_seed_from`]). A restarted or resumed actor process
+    /// starts at a fresh range (`incarnation << 28`), so its episode ids, env seeds and noise
+    /// never repeat those of an earlier start, and it does not go through the random warm-up
+    /// again. Only allowed before the first episode starts.
     pub fn start_at_episode(&mut self, episode: u64) -> Result<(), ActorError> {
         if self.episode.is_some() || self.n_episodes_started > 0 {
             return Err(ActorError::Misuse(format!(
@@ -581,6 +597,8 @@ impl Actor {
             )));
         }
         self.n_episodes_started = episode;
+        self.rollout.rng =
+            Pcg64Mcg::seed_from_u64(actor_rng_seed_from(self.seed, self.actor_id, episode));
         Ok(())
     }
 
@@ -592,6 +610,7 @@ impl Actor {
                 + self.rollout.env.n_physics_failures(),
             n_decisions: decisions.n_decisions,
             n_explore_decisions: decisions.n_explore,
+            n_random_decisions: decisions.n_random,
             n_explore_fallbacks: decisions.n_explore_fallbacks,
             frontier: self.rollout.frontier_stats,
             ..self.stats

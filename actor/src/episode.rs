@@ -78,6 +78,8 @@ pub(crate) struct DecisionCounters {
     pub n_decisions: u64,
     /// Decisions that took the graph-service's explore subgoal.
     pub n_explore: u64,
+    /// Decisions that took a uniform random subgoal (the warm-up).
+    pub n_random: u64,
     /// Decisions that asked for an explore subgoal and got none (the base source decided).
     pub n_explore_fallbacks: u64,
 }
@@ -314,6 +316,7 @@ impl Episode {
         let counters = &mut rollout.decisions;
         counters.n_decisions += 1;
         counters.n_explore += u64::from(decided.source == SubgoalSource::Explore);
+        counters.n_random += u64::from(decided.source == SubgoalSource::UniformRandom);
         counters.n_explore_fallbacks += u64::from(decided.fallback);
         Ok(decided.source.decision_kind())
     }

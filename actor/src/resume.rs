@@ -79,6 +79,7 @@ impl Actor {
         self.rollout.phi_version = s.phi_version;
         self.rollout.decisions.n_decisions = s.n_decisions;
         self.rollout.decisions.n_explore = s.n_explore_decisions;
+        self.rollout.decisions.n_random = s.n_random_decisions;
         self.rollout.decisions.n_explore_fallbacks = s.n_explore_fallbacks;
         self.rollout.frontier_stats = s.frontier;
         self.physics_failures_before = s

@@ -23,6 +23,19 @@ pub fn actor_rng_seed(seed: u64, actor_id: ActorId) -> u64 {
     splitmix64(splitmix64(seed) ^ u64::from(actor_id.0))
 }
 
+/// Seed of the generator of an actor that starts at its `first_episode`-th episode
+/// (`Actor::start_at_episode`; a restarted or resumed actor process starts at a fresh range):
+/// [`actor_rng_seed`] for 0, a stream of its own for any other start, so a restarted actor does
+/// not replay the action noise and random subgoals of the run's first start.
+pub fn actor_rng_seed_from(seed: u64, actor_id: ActorId, first_episode: u64) -> u64 {
+    let base = actor_rng_seed(seed, actor_id);
+    if first_episode == 0 {
+        base
+    } else {
+        splitmix64(base ^ splitmix64(first_episode))
+    }
+}
+
 /// Seed passed to `Env::reset` for the actor's `episode`-th episode (0-based).
 pub fn env_seed(seed: u64, actor_id: ActorId, episode: u64) -> u64 {
     let actor = splitmix64(splitmix64(seed ^ 0x656e_765f_7365_6564) ^ u64::from(actor_id.0));
@@ -64,5 +77,26 @@ mod tests {
             }
         }
         assert_eq!(env_seed(7, ActorId(3), 9), env_seed(7, ActorId(3), 9));
+    }
+
+    #[test]
+    fn a_start_past_episode_0_gets_a_generator_seed_of_its_own() {
+        assert_eq!(
+            actor_rng_seed_from(7, ActorId(1), 0),
+            actor_rng_seed(7, ActorId(1))
+        );
+        let starts = [0, 1 << 28, 2 << 28];
+        for (i, a) in starts.iter().enumerate() {
+            for b in &starts[i + 1..] {
+                assert_ne!(
+                    actor_rng_seed_from(7, ActorId(1), *a),
+                    actor_rng_seed_from(7, ActorId(1), *b)
+                );
+            }
+        }
+        assert_ne!(
+            actor_rng_seed_from(7, ActorId(1), 1 << 28),
+            actor_rng_seed_from(7, ActorId(2), 1 << 28)
+        );
     }
 }

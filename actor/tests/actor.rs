@@ -530,3 +530,81 @@ fn an_actor_saved_mid_episode_restores_as_if_that_episode_was_abandoned() {
         .restore_state(saved.save_state());
     assert!(wrong_id.is_err());
 }
+
+/// The decision kinds of the decision steps of `episode`.
+fn decision_kinds(episode: &[Chunk]) -> Vec<DecisionKind> {
+    records_of(episode)
+        .iter()
+        .map(|r| r.decision)
+        .filter(|d| *d != DecisionKind::None)
+        .collect()
+}
+
+#[test]
+fn the_random_warm_up_is_shared_by_the_actors_and_a_later_start_skips_it() {
+    let mut config = config(30, 60);
+    config.learner.high.random_episodes = 3;
+    config.run.n_actors = 2;
+    assert_eq!(actor::actor::random_episodes_per_actor(&config), 2);
+    let mut actor = Actor::new(&config, ActorId(1), 4).unwrap();
+    let kinds: Vec<Vec<DecisionKind>> = episodes(&mut actor, 3)
+        .iter()
+        .map(|e| decision_kinds(e))
+        .collect();
+    assert!(kinds[..2]
+        .iter()
+        .flatten()
+        .all(|d| *d == DecisionKind::Random));
+    assert!(
+        kinds[2].iter().all(|d| *d == DecisionKind::Policy),
+        "{kinds:?}"
+    );
+    assert_eq!(
+        actor.stats().n_random_decisions,
+        12,
+        "2 episodes of 6 decisions"
+    );
+    assert_eq!(actor.stats().n_decisions, 18);
+
+    // One actor takes the whole warm-up.
+    config.run.n_actors = 1;
+    let mut alone = Actor::new(&config, ActorId(0), 4).unwrap();
+    episodes(&mut alone, 3);
+    assert_eq!(alone.stats().n_random_decisions, 18);
+
+    // A restarted or resumed actor (a later incarnation) does not repeat it.
+    let mut restarted = Actor::new(&config, ActorId(0), 4).unwrap();
+    restarted.start_at_episode(1 << 28).unwrap();
+    let first = episodes(&mut restarted, 1);
+    assert!(decision_kinds(&first[0])
+        .iter()
+        .all(|d| *d == DecisionKind::Policy));
+    assert_eq!(restarted.stats().n_random_decisions, 0);
+}
+
+#[test]
+fn a_start_at_episode_0_is_a_fresh_actor_and_a_later_start_draws_other_noise() {
+    let config = config(30, 60);
+    let fresh = episodes(&mut Actor::new(&config, ActorId(0), 4).unwrap(), 2);
+    let mut at_zero = Actor::new(&config, ActorId(0), 4).unwrap();
+    at_zero.start_at_episode(0).unwrap();
+    assert!(
+        episodes(&mut at_zero, 2) == fresh,
+        "a start at 0 changes nothing"
+    );
+    // Restored from the state of an actor that started at 2^28 (same env seeds and episode
+    // ids as a later start) but with the generator of a fresh actor: a start at 2^28 must not
+    // act like it, or a restarted actor replays the first start's noise.
+    let mut later = Actor::new(&config, ActorId(0), 4).unwrap();
+    later.start_at_episode(1 << 28).unwrap();
+    let mut counter_only = Actor::new(&config, ActorId(0), 4).unwrap();
+    let mut state = Actor::new(&config, ActorId(0), 4).unwrap().save_state();
+    state.n_episodes_started = 1 << 28;
+    counter_only.restore_state(state).unwrap();
+    let (a, b) = (episodes(&mut later, 1), episodes(&mut counter_only, 1));
+    assert_eq!(a[0][0].header.episode_id, b[0][0].header.episode_id);
+    assert!(
+        a != b,
+        "the generator of a later start is a stream of its own"
+    );
+}

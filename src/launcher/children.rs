@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
+use super::starts::StartBook;
 use crate::run::RunContext;
 
 /// First restart delay of a crashed process; doubles with each of its crashes, up to
@@ -72,7 +73,10 @@ pub struct Restarts {
 struct Supervised {
     kind: ChildKind,
     process: Option<Child>,
+    /// Earlier starts of this process in the run folder, all launches ([`StartBook`]).
     incarnation: u32,
+    /// Crashes of this process in this launch (its restart back-off doubles with each).
+    crashes: u32,
     /// When a crashed process is due to come back.
     restart_at: Option<Instant>,
 }
@@ -81,6 +85,7 @@ pub struct Children {
     ctx: RunContext,
     exe: std::path::PathBuf,
     children: Vec<Supervised>,
+    starts: StartBook,
     restarts: u64,
     /// Restarts so far per [`ChildKind::family`].
     restarts_per_family: BTreeMap<&'static str, u64>,
@@ -96,6 +101,7 @@ impl Children {
             ctx: ctx.clone(),
             exe,
             children: Vec::new(),
+            starts: StartBook::open(&ctx.run_dir, ctx.resume)?,
             restarts: 0,
             restarts_per_family: BTreeMap::new(),
             recent_crashes: BTreeMap::new(),
@@ -120,20 +126,33 @@ impl Children {
     }
 
     pub fn spawn(&mut self, kind: ChildKind) -> anyhow::Result<()> {
-        let process = self.start(kind, 0)?;
+        let (process, incarnation) = self.start(kind)?;
         self.children.push(Supervised {
             kind,
             process: Some(process),
-            incarnation: 0,
+            incarnation,
+            crashes: 0,
             restart_at: None,
         });
         Ok(())
     }
 
-    /// Starts one process; its stdout/stderr go to `run_dir/logs/<name>.log` (appended across
-    /// restarts). Its own process group keeps a terminal Ctrl-C away from it: the launcher
+    /// Starts one process as its next incarnation (counted in the run folder's [`StartBook`]
+    /// first); its stdout/stderr go to `run_dir/logs/<name>.log` (appended across restarts and
+    /// launches). Its own process group keeps a terminal Ctrl-C away from it: the launcher
     /// decides the shutdown order.
-    fn start(&self, kind: ChildKind, incarnation: u32) -> anyhow::Result<Child> {
+    fn start(&mut self, kind: ChildKind) -> anyhow::Result<(Child, u32)> {
+        let incarnation = self.starts.next(&kind.name())?;
+        if matches!(kind, ChildKind::Actor(_))
+            && incarnation >= crate::proc::actor::MAX_INCARNATIONS
+        {
+            anyhow::bail!(
+                "{} has been started {incarnation} times in this run folder; the episode ids \
+                 of a further start would not fit (at most {} starts per actor)",
+                kind.name(),
+                crate::proc::actor::MAX_INCARNATIONS
+            );
+        }
         let log_path = self.log_path(kind);
         let log = File::options().create(true).append(true).open(&log_path)?;
         let mut command = Command::new(&self.exe);
@@ -167,7 +186,7 @@ impl Children {
             .join(crate::run::STATUS_DIR)
             .join(format!("{}.pid", kind.name()));
         crate::run::write_atomically(&pid_file, &child.id().to_string())?;
-        Ok(child)
+        Ok((child, incarnation))
     }
 
     /// While starting: `Some(message)` if the learner or graph-service has exited before it
@@ -210,7 +229,8 @@ impl Children {
                     tick.crashed += 1;
                     self.note_crash(kind, &status.to_string(), now)?;
                     let child = &mut self.children[i];
-                    let delay = backoff(child.incarnation);
+                    let delay = backoff(child.crashes);
+                    child.crashes = child.crashes.saturating_add(1);
                     tracing::warn!(
                         process = %kind.name(), %status, incarnation = child.incarnation,
                         "{} exited ({status}); restarting in {delay:?}", kind.name()
@@ -266,8 +286,7 @@ impl Children {
     /// Starts the next incarnation of child `i`.
     fn restart(&mut self, i: usize) -> anyhow::Result<()> {
         let kind = self.children[i].kind;
-        let incarnation = self.children[i].incarnation + 1;
-        let process = self.start(kind, incarnation)?;
+        let (process, incarnation) = self.start(kind)?;
         let child = &mut self.children[i];
         child.process = Some(process);
         child.incarnation = incarnation;
@@ -348,9 +367,10 @@ fn last_error(log: &std::path::Path) -> Option<String> {
         .map(str::to_owned)
 }
 
-fn backoff(incarnation: u32) -> Duration {
+/// The delay before restarting a process after its `earlier_crashes + 1`-th crash of this launch.
+fn backoff(earlier_crashes: u32) -> Duration {
     FIRST_BACKOFF
-        .saturating_mul(1 << incarnation.min(16))
+        .saturating_mul(1 << earlier_crashes.min(16))
         .min(MAX_BACKOFF)
 }
 

@@ -13,6 +13,7 @@
 
 mod children;
 mod metrics;
+mod starts;
 
 use std::time::{Duration, Instant};
 

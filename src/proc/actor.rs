@@ -96,6 +96,7 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
             "published_steps": published_steps, "published_chunks": published_chunks,
             "episodes": stats.episodes, "policy_version": stats.policy_version.0,
             "weights_rejected": stats.n_weights_rejected, "explore_decisions": stats.n_explore_decisions,
+            "random_decisions": stats.n_random_decisions,
             "explore_fallbacks": stats.n_explore_fallbacks, "reach_reports": stats.n_reach_reports,
             "fr_episodes": stats.frontier.n_episodes, "fr_no_route": stats.frontier.n_no_route,
             "stop_reason": reason,
@@ -145,10 +146,18 @@ impl Throttle {
     }
 }
 
-/// Episodes per incarnation range: a restarted actor starts at `incarnation × 2^28`, so its
-/// episode ids (and env seeds) never repeat those of its earlier incarnations.
+/// Episodes per incarnation range: an actor starts at `incarnation × 2^28`, so its episode ids
+/// (and env seeds and generator, see `Actor::start_at_episode`) never repeat those of its
+/// earlier incarnations, in this launch or an earlier one of the run (the launcher numbers
+/// starts over all launches, `launcher::starts`).
 const EPISODE_RANGE_BITS: u32 = 28;
 
+/// Starts of one actor a run folder can hold: the episode counter has
+/// [`actor::seeds::EPISODE_COUNTER_BITS`] bits, the low [`EPISODE_RANGE_BITS`] of them count
+/// one incarnation's episodes (2^28: far beyond a week of episodes of one actor).
+pub const MAX_INCARNATIONS: u32 = 1 << (actor::seeds::EPISODE_COUNTER_BITS - EPISODE_RANGE_BITS);
+
+/// The index of the first episode of the actor's `incarnation`-th start.
 pub fn first_episode(incarnation: u32) -> u64 {
     u64::from(incarnation) << EPISODE_RANGE_BITS
 }
@@ -185,6 +194,10 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
         (
             "actor/explore_fallbacks".to_owned(),
             s.n_explore_fallbacks as f64,
+        ),
+        (
+            "actor/random_decisions".to_owned(),
+            s.n_random_decisions as f64,
         ),
         ("actor/reach_reports".to_owned(), s.n_reach_reports as f64),
         (

@@ -48,8 +48,10 @@ pub struct HighLearnerConfig {
     /// Updates start once this many transitions are stored. Default 128 (= one batch).
     /// Unit: transitions. Source: code.
     pub min_transitions: u64,
-    /// Training episodes at the start that use uniform random high actions (when the subgoal
-    /// is not chosen by exploration). Default 300. Unit: episodes. Source: code (`start_epoch`).
+    /// Training episodes at the start of the run that use uniform random high actions (when
+    /// the subgoal is not chosen by exploration), shared by the actors: each takes
+    /// ⌈random_episodes / `run.n_actors`⌉ of its first episodes; restarted and resumed actors
+    /// take none. Default 300. Unit: episodes. Source: code (`start_epoch`).
     pub random_episodes: u64,
     /// Clamp the critic target `y = R + mask·γ·(min Q' − α log π)` to `[−T · p, 0]`, T the
     /// episode length in env steps (the task's own or `env.episode_length`), p the task's
