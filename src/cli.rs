@@ -130,7 +130,9 @@ pub struct TrainArgs {
     /// the file, in order).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
-    /// Number of actor processes (overrides `run.n_actors`; default: cores − 2, at least 1).
+    /// Number of actor processes (overrides `run.n_actors`; default: cores − 2, at least 1;
+    /// with `--serial`, 1 unless the config file or a `--set` gives `run.n_actors`, so a serial
+    /// run does not depend on the machine's core count).
     #[arg(long)]
     pub actors: Option<usize>,
     /// Run folder (default `<run.root_dir>/<run.name>`, i.e. `runs/antmaze-u`).

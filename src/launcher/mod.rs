@@ -265,6 +265,30 @@ fn wait_for_services(
     }
 }
 
+/// Serial mode's actor count when nothing sets one: the default `run.n_actors` (cores − 2)
+/// depends on the machine, and serial mode, which steps its actors in turn in one thread,
+/// would then give another run for the same config and seed on another machine.
+const SERIAL_DEFAULT_ACTORS: &str = "run.n_actors=1";
+
+/// Whether the config file or a `--set` gives `run.n_actors`. A file that does not parse
+/// counts as not giving it (loading it reports the problem).
+fn sets_n_actors(file: Option<&std::path::Path>, sets: &[String]) -> bool {
+    let by_set = sets.iter().any(|s| {
+        s.split_once('=')
+            .is_some_and(|(key, _)| key.trim() == "run.n_actors")
+    });
+    let by_file = file
+        .and_then(|path| std::fs::read_to_string(path).ok())
+        .and_then(|text| text.parse::<toml::Table>().ok())
+        .is_some_and(|table| {
+            table
+                .get("run")
+                .and_then(toml::Value::as_table)
+                .is_some_and(|run| run.contains_key("n_actors"))
+        });
+    by_set || by_file
+}
+
 /// Resolves `asi train`'s arguments into a run context (writes the resolved config). An
 /// existing run folder with a checkpoint is resumed ("resuming from checkpoint N (env steps
 /// S)"), after checking that the checkpoint fits this build and config, unless that checkpoint
@@ -278,6 +302,8 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
     }
     if let Some(actors) = args.actors {
         overrides.push(format!("run.n_actors={actors}"));
+    } else if args.serial && !sets_n_actors(args.config.as_deref(), &args.set) {
+        overrides.push(SERIAL_DEFAULT_ACTORS.to_owned());
     }
     let config =
         protocol::Config::load(args.config.as_deref(), &overrides).with_context(|| match &args
@@ -482,6 +508,19 @@ mod tests {
             episodes_completed,
             files: Vec::new(),
         }
+    }
+
+    #[test]
+    fn serial_mode_takes_one_actor_unless_the_file_or_a_set_gives_a_count() {
+        let config = |name: &str| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(name);
+        let smoke = config("configs/smoke.toml"); // [run] n_actors = 2
+        let ant = config("configs/antmaze-u.toml");
+        assert!(sets_n_actors(Some(&smoke), &[]));
+        assert!(!sets_n_actors(Some(&ant), &[]));
+        assert!(!sets_n_actors(None, &["run.seed=3".to_owned()]));
+        assert!(sets_n_actors(None, &[" run.n_actors = 3".to_owned()]));
+        assert!(!sets_n_actors(None, &["run.n_actors_x=3".to_owned()]));
+        assert!(!sets_n_actors(Some(&config("no-such.toml")), &[]));
     }
 
     #[test]
