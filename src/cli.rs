@@ -170,9 +170,14 @@ pub struct ActorArgs {
     /// This actor's index (0-based).
     #[arg(long)]
     pub actor_id: u32,
-    /// How many times the launcher restarted this actor.
+    /// Earlier starts of this actor in the run folder, over all launches (set by the launcher;
+    /// fixes the actor's episode ids, env seeds and generator).
     #[arg(long, default_value_t = 0)]
     pub incarnation: u32,
+    /// Training episodes the run had completed when the launcher started this actor (set by
+    /// the launcher): the actor takes its share of what is left of the random warm-up.
+    #[arg(long, default_value_t = 0)]
+    pub run_episodes: u64,
 }
 
 #[derive(Debug, Args)]

@@ -73,6 +73,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 &proc::actor::ActorArgs {
                     actor_id: args.actor_id,
                     incarnation: args.incarnation,
+                    run_episodes: args.run_episodes,
                 },
             )
         }

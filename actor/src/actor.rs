@@ -135,14 +135,21 @@ pub struct ActorStats {
     pub last_fr_episode: u64,
 }
 
-/// This actor's share of the run's random warm-up: `learner.high.random_episodes` counts the
-/// run's first training episodes (SPEC §6.2: "the first 300 training episodes"), which the
-/// `run.n_actors` actors run side by side, so each takes its first ⌈random_episodes /
-/// n_actors⌉ (one actor: all of them). Before, every actor took all of them: 14 actors on a
-/// 16-core machine ran 4,200 random episodes instead of 300.
-pub fn random_episodes_per_actor(config: &Config) -> u64 {
+/// An actor's share of what is left of the run's random warm-up when it starts, the run
+/// having completed `run_episodes` training episodes: `learner.high.random_episodes` counts
+/// the run's first training episodes (SPEC §6.2: "the first 300 training episodes"), which the
+/// `run.n_actors` actors run side by side, so each takes ⌈left / n_actors⌉ (one actor: all of
+/// them). A fresh actor takes `warm_up_share(config, 0)` ([`Actor::new`]); a restarted or
+/// resumed one is told its share ([`Actor::start_at_episode`]). Before, every actor took all
+/// 300 (14 actors on a 16-core machine: 4,200 random episodes), and again at every resume.
+pub fn warm_up_share(config: &Config, run_episodes: u64) -> u64 {
     let actors = u64::try_from(config.run.n_actors.max(1)).unwrap_or(u64::MAX);
-    config.learner.high.random_episodes.div_ceil(actors)
+    let left = config
+        .learner
+        .high
+        .random_episodes
+        .saturating_sub(run_episodes);
+    left.div_ceil(actors)
 }
 
 /// One actor: an environment, the actor-side networks, and the episode in progress.
@@ -156,7 +163,8 @@ pub struct Actor {
     pub(crate) actor_id: ActorId,
     seed: u64,
     chunk_steps: usize,
-    random_episodes: u64,
+    /// Episode indices below this one use random high actions (the warm-up share).
+    random_until: u64,
     explore_start_episode: u64,
     far_goal_fraction: f64,
     pub(crate) n_episodes_started: u64,
@@ -237,7 +245,7 @@ impl Actor {
             actor_id,
             seed,
             chunk_steps,
-            random_episodes: random_episodes_per_actor(config),
+            random_until: warm_up_share(config, 0),
             explore_start_episode: config.exploration.explore_start_episode,
             far_goal_fraction: config.exploration.far_goal_fraction,
             n_episodes_started: 0,
@@ -388,7 +396,7 @@ impl Actor {
             self.force_far_goal(&mut reset)?;
         }
         let plan = SubgoalPlan {
-            base: SubgoalSource::for_training_episode(index, self.random_episodes),
+            base: SubgoalSource::for_training_episode(index, self.random_until),
             explore: ExploreGate::for_schedule(&self.stats.schedule, self.explore_start_episode),
         };
         let far_goal =
@@ -583,13 +591,17 @@ impl Actor {
         Ok(())
     }
 
-    /// Makes the next episode the `episode`-th of this actor (its id, env seed and position in
-    /// the random warm-up follow from it) and, for `episode > 0`, gives its generator a stream
+    /// Makes the next episode the `episode`-th of this actor (its id and env seed follow from
+    /// it), its first `warm_up_episodes` random-action episodes (its [`warm_up_share`] of what
+    /// the run has left of the warm-up), and, for `episode > 0`, gives its generator a stream
     /// of its own ([`crate::seeds::actor_rng_seed_from`]). A restarted or resumed actor process
     /// starts at a fresh range (`incarnation << 28`), so its episode ids, env seeds and noise
-    /// never repeat those of an earlier start, and it does not go through the random warm-up
-    /// again. Only allowed before the first episode starts.
-    pub fn start_at_episode(&mut self, episode: u64) -> Result<(), ActorError> {
+    /// never repeat those of an earlier start. Only allowed before the first episode starts.
+    pub fn start_at_episode(
+        &mut self,
+        episode: u64,
+        warm_up_episodes: u64,
+    ) -> Result<(), ActorError> {
         if self.episode.is_some() || self.n_episodes_started > 0 {
             return Err(ActorError::Misuse(format!(
                 "start_at_episode({episode}) after {} episodes already started",
@@ -597,6 +609,7 @@ impl Actor {
             )));
         }
         self.n_episodes_started = episode;
+        self.random_until = episode.saturating_add(warm_up_episodes);
         self.rollout.rng =
             Pcg64Mcg::seed_from_u64(actor_rng_seed_from(self.seed, self.actor_id, episode));
         Ok(())

@@ -38,7 +38,7 @@ pub mod resume;
 pub mod seeds;
 pub mod subgoal;
 
-pub use actor::{Actor, ActorStats};
+pub use actor::{warm_up_share, Actor, ActorStats};
 pub use chunk::Chunk;
 pub use error::{ActorError, WeightsRejection};
 pub use frontier::{FrontierParams, FrontierStats};

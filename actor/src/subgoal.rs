@@ -10,8 +10,9 @@
 //!   reaches about 25 in norm after the outward push), and clipping would make the stored action
 //!   disagree with the subgoal the low level actually chased.
 //!
-//! An episode's `SubgoalPlan` fixes its base source (random for the actor's first
-//! `learner.high.random_episodes` episodes, the policy afterwards) and, once the run-wide
+//! An episode's `SubgoalPlan` fixes its base source (random for the actor's share of the run's
+//! random warm-up, `learner.high.random_episodes`, see `actor::warm_up_share`; the policy
+//! afterwards) and, once the run-wide
 //! training episode count exceeds `exploration.explore_start_episode`, an [`ExploreGate`]: at
 //! each decision, with probability `count_prob`, the explore subgoal is asked for; when the
 //! oracle has no answer the base source decides (a counted fallback). As in the reference code
@@ -37,8 +38,8 @@ use crate::oracle::{ExploreAnswer, GraphOracle};
 /// Where the high-level action of one decision comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SubgoalSource {
-    /// Uniform random deltas in the action box (the first `learner.high.random_episodes`
-    /// training episodes of each actor; SPEC §6.2).
+    /// Uniform random deltas in the action box (the run's first `learner.high.random_episodes`
+    /// training episodes, shared by the actors; SPEC §6.2).
     UniformRandom,
     /// A stochastic sample of the high policy on `[obs, goal]`.
     Policy,
@@ -72,10 +73,10 @@ impl ExploreGate {
 }
 
 impl SubgoalSource {
-    /// The base source of a training episode: random for this actor's first `random_episodes`
-    /// episodes (`episode` is 0-based), the policy afterwards.
-    pub fn for_training_episode(episode: u64, random_episodes: u64) -> Self {
-        if episode < random_episodes {
+    /// The base source of a training episode: random for episode indices below `random_until`
+    /// (the end of this actor's warm-up share), the policy afterwards.
+    pub fn for_training_episode(episode: u64, random_until: u64) -> Self {
+        if episode < random_until {
             Self::UniformRandom
         } else {
             Self::Policy

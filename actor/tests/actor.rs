@@ -494,7 +494,7 @@ fn an_actor_restored_between_episodes_continues_with_the_same_chunks_and_counter
     assert_eq!(restored.stats(), saved.stats());
     assert_eq!(restored.stats().n_physics_failures, 2);
     let mut counter_only = failing_actor(60, true);
-    counter_only.start_at_episode(2).unwrap();
+    counter_only.start_at_episode(2, 0).unwrap();
     let expected = episodes(&mut saved, 2);
     assert_eq!(episodes(&mut restored, 2), expected);
     assert_eq!(restored.stats(), saved.stats());
@@ -545,7 +545,14 @@ fn the_random_warm_up_is_shared_by_the_actors_and_a_later_start_skips_it() {
     let mut config = config(30, 60);
     config.learner.high.random_episodes = 3;
     config.run.n_actors = 2;
-    assert_eq!(actor::actor::random_episodes_per_actor(&config), 2);
+    assert_eq!(actor::warm_up_share(&config, 0), 2);
+    assert_eq!(
+        actor::warm_up_share(&config, 1),
+        1,
+        "2 episodes left over 2 actors"
+    );
+    assert_eq!(actor::warm_up_share(&config, 3), 0);
+    assert_eq!(actor::warm_up_share(&config, 50), 0);
     let mut actor = Actor::new(&config, ActorId(1), 4).unwrap();
     let kinds: Vec<Vec<DecisionKind>> = episodes(&mut actor, 3)
         .iter()
@@ -572,14 +579,29 @@ fn the_random_warm_up_is_shared_by_the_actors_and_a_later_start_skips_it() {
     episodes(&mut alone, 3);
     assert_eq!(alone.stats().n_random_decisions, 18);
 
-    // A restarted or resumed actor (a later incarnation) does not repeat it.
+    // A restarted or resumed actor (a later incarnation) takes only what the run has left of
+    // it: none after the warm-up, its share of the rest during it.
     let mut restarted = Actor::new(&config, ActorId(0), 4).unwrap();
-    restarted.start_at_episode(1 << 28).unwrap();
+    restarted.start_at_episode(1 << 28, 0).unwrap();
     let first = episodes(&mut restarted, 1);
     assert!(decision_kinds(&first[0])
         .iter()
         .all(|d| *d == DecisionKind::Policy));
     assert_eq!(restarted.stats().n_random_decisions, 0);
+    let mut during = Actor::new(&config, ActorId(0), 4).unwrap();
+    during.start_at_episode(2 << 28, 1).unwrap();
+    let kinds: Vec<Vec<DecisionKind>> = episodes(&mut during, 2)
+        .iter()
+        .map(|e| decision_kinds(e))
+        .collect();
+    assert!(
+        kinds[0].iter().all(|d| *d == DecisionKind::Random),
+        "{kinds:?}"
+    );
+    assert!(
+        kinds[1].iter().all(|d| *d == DecisionKind::Policy),
+        "{kinds:?}"
+    );
 }
 
 #[test]
@@ -587,7 +609,9 @@ fn a_start_at_episode_0_is_a_fresh_actor_and_a_later_start_draws_other_noise() {
     let config = config(30, 60);
     let fresh = episodes(&mut Actor::new(&config, ActorId(0), 4).unwrap(), 2);
     let mut at_zero = Actor::new(&config, ActorId(0), 4).unwrap();
-    at_zero.start_at_episode(0).unwrap();
+    at_zero
+        .start_at_episode(0, actor::warm_up_share(&config, 0))
+        .unwrap();
     assert!(
         episodes(&mut at_zero, 2) == fresh,
         "a start at 0 changes nothing"
@@ -596,7 +620,7 @@ fn a_start_at_episode_0_is_a_fresh_actor_and_a_later_start_draws_other_noise() {
     // ids as a later start) but with the generator of a fresh actor: a start at 2^28 must not
     // act like it, or a restarted actor replays the first start's noise.
     let mut later = Actor::new(&config, ActorId(0), 4).unwrap();
-    later.start_at_episode(1 << 28).unwrap();
+    later.start_at_episode(1 << 28, 0).unwrap();
     let mut counter_only = Actor::new(&config, ActorId(0), 4).unwrap();
     let mut state = Actor::new(&config, ActorId(0), 4).unwrap().save_state();
     state.n_episodes_started = 1 << 28;

@@ -86,6 +86,10 @@ pub struct Children {
     exe: std::path::PathBuf,
     children: Vec<Supervised>,
     starts: StartBook,
+    /// The most training episodes the run is known to have completed (the resumed checkpoint's,
+    /// then the learner's reports): an actor started now takes its share of what is left of
+    /// the random warm-up (`actor::warm_up_share`).
+    run_episodes: u64,
     restarts: u64,
     /// Restarts so far per [`ChildKind::family`].
     restarts_per_family: BTreeMap<&'static str, u64>,
@@ -102,10 +106,16 @@ impl Children {
             exe,
             children: Vec::new(),
             starts: StartBook::open(&ctx.run_dir, ctx.resume)?,
+            run_episodes: 0,
             restarts: 0,
             restarts_per_family: BTreeMap::new(),
             recent_crashes: BTreeMap::new(),
         })
+    }
+
+    /// Notes that the run has completed at least `episodes` training episodes.
+    pub fn note_run_episodes(&mut self, episodes: u64) {
+        self.run_episodes = self.run_episodes.max(episodes);
     }
 
     pub fn total_restarts(&self) -> u64 {
@@ -156,19 +166,8 @@ impl Children {
         let log_path = self.log_path(kind);
         let log = File::options().create(true).append(true).open(&log_path)?;
         let mut command = Command::new(&self.exe);
-        match kind {
-            ChildKind::GraphService => command.arg("graph-service"),
-            ChildKind::Learner => command.arg("learner"),
-            ChildKind::Actor(id) => command.args([
-                "actor",
-                "--actor-id",
-                &id.to_string(),
-                "--incarnation",
-                &incarnation.to_string(),
-            ]),
-            ChildKind::Evaluator => command.arg("evaluator"),
-        };
         command
+            .args(subcommand(kind, incarnation, self.run_episodes))
             .arg("--run-dir")
             .arg(&self.ctx.run_dir)
             .args(["--run-id", self.ctx.run_id.as_str()])
@@ -367,6 +366,25 @@ fn last_error(log: &std::path::Path) -> Option<String> {
         .map(str::to_owned)
 }
 
+/// The `asi` subcommand and its own arguments that start `kind` as its `incarnation`, the run
+/// having completed `run_episodes` training episodes.
+fn subcommand(kind: ChildKind, incarnation: u32, run_episodes: u64) -> Vec<String> {
+    match kind {
+        ChildKind::GraphService => vec!["graph-service".to_owned()],
+        ChildKind::Learner => vec!["learner".to_owned()],
+        ChildKind::Actor(id) => vec![
+            "actor".to_owned(),
+            "--actor-id".to_owned(),
+            id.to_string(),
+            "--incarnation".to_owned(),
+            incarnation.to_string(),
+            "--run-episodes".to_owned(),
+            run_episodes.to_string(),
+        ],
+        ChildKind::Evaluator => vec!["evaluator".to_owned()],
+    }
+}
+
 /// The delay before restarting a process after its `earlier_crashes + 1`-th crash of this launch.
 fn backoff(earlier_crashes: u32) -> Duration {
     FIRST_BACKOFF
@@ -457,6 +475,27 @@ mod tests {
             "{err}"
         );
         assert!(err.contains("run.max_restarts = 2"), "{err}");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn an_actor_is_told_its_incarnation_and_the_episodes_the_run_has_completed() {
+        let (mut children, dir) = children(1);
+        children.note_run_episodes(120);
+        children.note_run_episodes(80); // a restarted learner's lower count: the warm-up stays done
+        assert_eq!(
+            subcommand(ChildKind::Actor(3), 2, children.run_episodes),
+            [
+                "actor",
+                "--actor-id",
+                "3",
+                "--incarnation",
+                "2",
+                "--run-episodes",
+                "120"
+            ]
+        );
+        assert_eq!(subcommand(ChildKind::Learner, 5, 120), ["learner"]);
         let _ = std::fs::remove_dir_all(dir);
     }
 

@@ -158,6 +158,11 @@ impl MetricsBook {
         self.values.get(key).copied().unwrap_or(0.0)
     }
 
+    /// Training episodes the learner last reported completed (0 before its first report).
+    pub fn episodes_completed(&self) -> u64 {
+        self.get("learner/ingest/episodes_completed") as u64
+    }
+
     pub fn budget_reached(&self, config: &Config) -> bool {
         let steps = self.get("learner/ingest/env_steps") as u64;
         let episodes = self.get("learner/ingest/episodes_completed") as u64;

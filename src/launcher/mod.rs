@@ -64,6 +64,13 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let control = channels.control_publisher(&node)?;
     let mut book = MetricsBook::create(&ctx, ctx.resume)?;
     let mut children = Children::new(&ctx)?;
+    if ctx.resume {
+        if let Ok(Some(manifest)) = resume_point(config, &ctx.run_dir) {
+            // A checkpoint of a build before the count was recorded: taken as past the warm-up.
+            let done = manifest.episodes_completed;
+            children.note_run_episodes(done.unwrap_or(config.learner.high.random_episodes));
+        }
+    }
     children.spawn(ChildKind::GraphService)?;
     children.spawn(ChildKind::Learner)?;
     let started = wait_until_ready(&ctx, &node, &mut children);
@@ -165,6 +172,7 @@ fn supervise(
             return Ok(Ending::Signal);
         }
         book.record(&metrics_in.drain()?);
+        children.note_run_episodes(book.episodes_completed());
         let restarts = children.restart_crashed()?;
         if restarts.crashed > 0 {
             // The dead process's ports would otherwise stay registered with its services.

@@ -19,15 +19,18 @@ const THROTTLE_WAIT: Duration = Duration::from_millis(100);
 
 pub struct ActorArgs {
     pub actor_id: u32,
-    /// How many times the launcher has (re)started this actor; keeps episode ids unique.
+    /// Earlier starts of this actor in the run folder (all launches); keeps episode ids unique.
     pub incarnation: u32,
+    /// Training episodes the run had completed when this actor was started.
+    pub run_episodes: u64,
 }
 
 pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     let config = &ctx.config;
     let mut actor = Actor::new(config, ActorId(args.actor_id), config.run.seed)
         .context("building the actor")?;
-    actor.start_at_episode(first_episode(args.incarnation))?;
+    let warm_up = actor::warm_up_share(config, args.run_episodes);
+    actor.start_at_episode(first_episode(args.incarnation), warm_up)?;
     let node = node(ctx, &format!("actor-{}", args.actor_id))?;
     let channels = Channels::new(config, &ctx.run_id, &actor.layout());
     let trajectories = channels.trajectory_publisher(&node)?;

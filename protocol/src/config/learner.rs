@@ -49,9 +49,10 @@ pub struct HighLearnerConfig {
     /// Unit: transitions. Source: code.
     pub min_transitions: u64,
     /// Training episodes at the start of the run that use uniform random high actions (when
-    /// the subgoal is not chosen by exploration), shared by the actors: each takes
-    /// ⌈random_episodes / `run.n_actors`⌉ of its first episodes; restarted and resumed actors
-    /// take none. Default 300. Unit: episodes. Source: code (`start_epoch`).
+    /// the subgoal is not chosen by exploration), shared by the actors: an actor takes
+    /// ⌈left / `run.n_actors`⌉ of its first episodes, `left` being what the run has not done
+    /// of them when the actor starts (all of them at the start; less for an actor restarted or
+    /// resumed later). Default 300. Unit: episodes. Source: code (`start_epoch`).
     pub random_episodes: u64,
     /// Clamp the critic target `y = R + mask·γ·(min Q' − α log π)` to `[−T · p, 0]`, T the
     /// episode length in env steps (the task's own or `env.episode_length`), p the task's
