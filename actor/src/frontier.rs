@@ -28,7 +28,7 @@
 //! route and g_F are points of the φ-space the episode started in (the actor ends FR mode when
 //! a new φ arrives mid-episode, as those points would no longer mean anything).
 
-use protocol::config::{CountModeScore, NearFrontier};
+use protocol::config::NearFrontier;
 use protocol::graph::FrontierRoute;
 use protocol::{Config, DecisionKind, LatentPoint, PhiVersion};
 use rand::Rng;
@@ -59,20 +59,13 @@ pub struct FrontierParams {
 }
 
 impl FrontierParams {
-    /// The parameters of `config`; `Ok(None)` when `asi.frontier_reaching` is off. Refuses
-    /// `asi.count_mode_score = "future_count"`, which the graph-service's `LeastVisited` does
-    /// not score (it answers with graph visit counts only).
+    /// The parameters of `config`; `Ok(None)` when `asi.frontier_reaching` is off. (How
+    /// count-mode candidates are scored, `asi.count_mode_score`, is the graph-service's
+    /// business: it answers `LeastVisited`.)
     pub fn from_config(config: &Config) -> Result<Option<Self>, ActorError> {
         let asi = &config.asi;
         if !asi.frontier_reaching {
             return Ok(None);
-        }
-        if asi.count_mode_score == CountModeScore::FutureCount {
-            return Err(ActorError::Misuse(
-                "asi.count_mode_score = \"future_count\" is not supported by the actor's count \
-                 mode (the graph-service scores candidates by graph visits); use \"graph_visits\""
-                    .to_owned(),
-            ));
         }
         Ok(Some(Self {
             k_range: asi.fr_k_range,

@@ -418,17 +418,17 @@ fn the_draw_asks_for_a_route_only_when_fr_is_on_and_fr_prob_is_positive() {
 }
 
 #[test]
-fn future_count_scoring_is_refused_with_the_field_named() {
+fn future_count_scoring_is_accepted_and_left_to_the_graph_service() {
     let mut config = Config::default();
     config.asi.count_mode_score = protocol::config::CountModeScore::FutureCount;
-    let err = config.validate().unwrap_err().to_string();
-    assert!(err.contains("asi.count_mode_score"), "{err}");
-    assert!(FrontierParams::from_config(&config)
-        .unwrap_err()
-        .to_string()
-        .contains("asi.count_mode_score"));
-    config.asi.frontier_reaching = false;
-    assert!(config.validate().is_ok(), "no FR, no count mode to score");
+    assert!(config.validate().is_ok());
+    let mut default = Config::default();
+    default.asi.count_mode_score = protocol::config::CountModeScore::GraphVisits;
+    assert_eq!(
+        FrontierParams::from_config(&config).unwrap(),
+        FrontierParams::from_config(&default).unwrap(),
+        "the actor's count mode is the same; the graph-service scores the candidates"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -15,13 +15,17 @@
 //!   `RouteAnswer::NoRoute { direct, fallback }` carry the [`NoRouteReason`] (empty graph,
 //!   start cell unknown, end cell unknown, unreachable, nothing reachable); they are counted
 //!   (`frontier_not_found`, `routes_not_found`).
-//! - `LeastVisited`: answered from the visit counts (which exist before the graph); an empty
-//!   candidate list is `InvalidRequest`.
+//! - `LeastVisited`: the candidate with the lowest score, first on ties, and its score: by
+//!   `asi.count_mode_score`, the graph visit count n(v) of its cell (paper Eq. 10; the counts
+//!   exist before the graph) or HESS's future count F of its cell ([`crate::hess`]; 1 for a
+//!   cell without samples, as the reference code's `future_hash`). An empty candidate list,
+//!   or a candidate whose graph cell key is out of range, is `InvalidRequest`.
 //! - `ExploreSubgoal`: HESS's count-based subgoal ([`crate::hess`]); `NotReady` with a reason
 //!   while no state is stored. Needs no graph.
 //! - `ReportReaching`: adds the samples to the potential map, answers `Ack`; a negative error
 //!   refuses the whole batch (`InvalidRequest`, nothing added).
 
+use protocol::config::CountModeScore;
 use protocol::graph::{
     DumpNode, FrontierRoute, GraphDump, GraphRequestHeader, GraphResponseHeader,
     GraphStats as WireStats, GraphStatus, NoRouteReason, ReachSample, RouteAnswer, RouteQuery,
@@ -260,10 +264,17 @@ impl GraphService {
     }
 
     fn answer_least_visited(&self, candidates: &[LatentPoint]) -> Result<Answer, Refusal> {
-        match self.counts.least_visited(candidates) {
-            Ok(Some((index, visits))) => Ok(Answer::Ok(GraphResponse::LeastVisited {
+        let least = match self.count_mode_score {
+            CountModeScore::GraphVisits => self
+                .counts
+                .least_visited(candidates)
+                .map(|best| best.map(|(index, visits)| (index, visits as f64))),
+            CountModeScore::FutureCount => self.least_future_count(candidates),
+        };
+        match least {
+            Ok(Some((index, score))) => Ok(Answer::Ok(GraphResponse::LeastVisited {
                 index: index as u32,
-                visits: visits as f32,
+                visits: score as f32,
             })),
             Ok(None) => Err(Refusal::invalid(
                 "LeastVisited needs at least one candidate",
@@ -273,6 +284,25 @@ impl GraphService {
                 out.index, out.point
             ))),
         }
+    }
+
+    /// The candidate whose cell has the lowest HESS future count (first on ties) and that
+    /// count; candidates are range-checked against the graph grid as for visit counts.
+    fn least_future_count(
+        &self,
+        candidates: &[LatentPoint],
+    ) -> Result<Option<(usize, f64)>, crate::counts::OutOfRange> {
+        let mut best: Option<(usize, f64)> = None;
+        for (index, &point) in candidates.iter().enumerate() {
+            if self.counts.at(point).is_none() {
+                return Err(crate::counts::OutOfRange { index, point });
+            }
+            let score = self.hess.future_at(point);
+            if best.is_none_or(|(_, lowest)| score < lowest) {
+                best = Some((index, score));
+            }
+        }
+        Ok(best)
     }
 
     fn dump(&self, graph: &LatentGraph) -> Answer {

@@ -17,7 +17,7 @@
 
 use std::collections::BTreeMap;
 
-use protocol::config::Config;
+use protocol::config::{Config, CountModeScore};
 use protocol::{
     ActorId, EpisodeId, LatentPoint, PhiVersion, StepLayout, StepView, TrajectoryFlags,
     TrajectoryHeader, WeightsHeader,
@@ -96,6 +96,8 @@ pub struct GraphService {
     /// `graph.route_table_max_nodes`.
     route_table_max_nodes: usize,
     pub(crate) frontier_fraction: f64,
+    /// How `LeastVisited` scores FR count-mode candidates (`asi.count_mode_score`).
+    pub(crate) count_mode_score: CountModeScore,
     pub(crate) loader: PhiLoader,
     pub(crate) phi: Option<Phi>,
     pub(crate) store: TrajectoryStore,
@@ -143,6 +145,7 @@ impl GraphService {
             remap_threads: graph.remap_threads,
             route_table_max_nodes: graph.route_table_max_nodes,
             frontier_fraction: config.asi.frontier_fraction,
+            count_mode_score: config.asi.count_mode_score,
             loader: PhiLoader::new(spec, seed)?,
             phi: None,
             store: TrajectoryStore::new(dims.obs_dim, graph.max_stored_steps),

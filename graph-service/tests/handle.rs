@@ -389,6 +389,56 @@ fn least_visited_picks_the_candidate_with_fewest_stored_states() {
 }
 
 #[test]
+fn least_visited_scores_by_hess_future_count_when_configured() {
+    let mut config = config();
+    config.asi.count_mode_score = protocol::config::CountModeScore::FutureCount;
+    config.hierarchy.c = 1; // every stored state is a decision state of the future counts
+    let mut service = plus_service_with(&config);
+    assert!(service.hess().n_future_recomputes() > 0);
+    // Brute force: the first candidate with the lowest F of its 3.0-cell.
+    let brute = |service: &graph_service::GraphService, candidates: &[[f32; 2]]| {
+        let scores: Vec<f64> = candidates
+            .iter()
+            .map(|&p| service.hess().future_at(p))
+            .collect();
+        let lowest = scores.iter().copied().fold(f64::INFINITY, f64::min);
+        let index = scores.iter().position(|&s| s == lowest).unwrap();
+        (index as u32, lowest as f32)
+    };
+    let visited = vec![at(0, 0), at(4, 0), at(0, -4), at(-3, 0), at(0, 2)];
+    let unvisited_last = vec![at(0, 0), at(4, 0), at(25, 25)];
+    for candidates in [visited, unvisited_last] {
+        let (index, score) = brute(&service, &candidates);
+        let (response, body) = ask(
+            &mut service,
+            &GraphRequest::LeastVisited {
+                candidates: candidates.clone(),
+            },
+        );
+        assert_eq!(status(&response), GraphStatus::Ok);
+        assert_eq!(
+            body,
+            Some(GraphResponse::LeastVisited {
+                index,
+                visits: score
+            }),
+            "{candidates:?}"
+        );
+    }
+    // Visited cells have F ≥ 1 (every sample is a visit), a cell without samples F = 1: the
+    // unvisited candidate wins only against visited ones with F > 1.
+    assert!(service.hess().future_at(at(0, 0)) > 1.0);
+    assert_eq!(service.hess().future_at(at(25, 25)), 1.0);
+    let (response, _) = ask(
+        &mut service,
+        &GraphRequest::LeastVisited {
+            candidates: vec![at(0, 0), [1e30, 0.0]],
+        },
+    );
+    assert_eq!(status(&response), GraphStatus::InvalidRequest);
+}
+
+#[test]
 fn dump_lists_nodes_with_visits_and_edges() {
     let mut service = plus_service();
     let (response, body) = ask(&mut service, &GraphRequest::Dump);

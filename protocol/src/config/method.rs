@@ -348,9 +348,11 @@ pub struct AsiConfig {
     /// Candidates drawn uniformly in the ±abs_range box in count mode. Default 100.
     /// Source: code.
     pub count_mode_candidates: usize,
-    /// How count mode scores candidates: `"graph_visits"` (default, paper Eq. 10) or
-    /// `"future_count"` (code: the HESS future-count hash; refused by the config check while
-    /// `frontier_reaching` is on, as the graph-service does not score it yet).
+    /// How count mode scores candidates (the lowest wins): `"graph_visits"` (default, paper
+    /// Eq. 10: the graph visit count n(v) of the candidate's cell, 0 for a cell never visited)
+    /// or `"future_count"` (released code: HESS's future count F of the candidate's 3.0-cell,
+    /// 1 for a cell without samples, so a visited cell whose states rarely lead on can beat an
+    /// unvisited one, e.g. behind a wall).
     pub count_mode_score: CountModeScore,
     /// What an FR episode does once φ(s_t) is within ε of the frontier: `"count_mode"`
     /// (default; paper and code: count mode for the rest of the episode) or `"end_fr"` (an
@@ -462,13 +464,6 @@ impl AsiConfig {
             "asi.count_mode_candidates",
             self.count_mode_candidates as u64,
         );
-        if self.frontier_reaching && self.count_mode_score == CountModeScore::FutureCount {
-            c.issue(
-                "asi.count_mode_score",
-                "future_count",
-                "is not supported yet: the graph-service scores FR count-mode candidates by graph visits only; use \"graph_visits\"",
-            );
-        }
         c.non_negative("asi.si_alpha", self.si_alpha);
         c.non_negative("asi.si_beta", self.si_beta);
         c.at_least_one("asi.si_batch_size", self.si_batch_size as u64);
