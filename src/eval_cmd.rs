@@ -70,6 +70,9 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     println!("seed: {seed}");
     println!("success_rate: {:.4}", report.success_rate);
     println!("mean_final_distance: {:.4}", report.mean_final_distance);
+    if let Some(along) = report.mean_final_path_distance {
+        println!("mean_final_path_distance: {along:.4}");
+    }
     println!("mean_length: {:.1}", report.mean_length);
     println!("mean_return: {:.4}", report.mean_return);
     if let Some(path) = &args.png {

@@ -138,6 +138,12 @@ fn a_serial_run_stops_on_sigterm_with_a_checkpoint_and_asi_eval_evaluates_its_we
         .parse()
         .expect("a number");
     assert!(distance.is_finite() && distance >= 0.0, "{distance}");
+    // Along the maze: whole 4 m cells, at most the 6 cells from the start to the goal.
+    let along: f64 = field(&stdout, "mean_final_path_distance")
+        .parse()
+        .expect("a number");
+    assert!((0.0..=24.0).contains(&along), "{along}");
+    assert!((along * 3.0 / 4.0 - (along * 3.0 / 4.0).round()).abs() < 1e-3, "{along}");
     assert!(
         field(&stdout, "train_episodes")
             .parse::<u64>()

@@ -31,6 +31,10 @@ pub struct EvalReport {
     pub success_rate: f64,
     /// Mean over episodes of the final xy distance to the goal, metres.
     pub mean_final_distance: f64,
+    /// Mean over episodes of the distance along the maze from the final position to the goal
+    /// (`Maze::path_distance_m`, cell resolution), metres; `None` on tasks without a maze or
+    /// when no episode ended in a free cell (those that did not are left out of the mean).
+    pub mean_final_path_distance: Option<f64>,
     /// Mean episode length, env steps.
     pub mean_length: f64,
     /// Mean undiscounted env return.
@@ -135,6 +139,7 @@ impl Evaluator {
             n_episodes,
             success_rate: 0.0,
             mean_final_distance: 0.0,
+            mean_final_path_distance: None,
             mean_length: 0.0,
             mean_return: 0.0,
             trajectories: Vec::with_capacity(n_episodes as usize),
@@ -142,9 +147,13 @@ impl Evaluator {
             policy_version: self.policy_version,
             phi_version: self.phi_version,
         };
+        let mut path_distances = Vec::with_capacity(n_episodes as usize);
         for episode in 0..n_episodes {
             let seed = eval_seed(self.seed, index, episode);
             let outcome = self.episode(seed)?;
+            if let (Some(maze), Some(&last)) = (self.env.maze(), outcome.path.last()) {
+                path_distances.extend(maze.path_distance_m(last, outcome.goal).map(f64::from));
+            }
             report.success_rate += f64::from(u8::from(outcome.success));
             report.mean_final_distance += outcome.final_distance;
             report.mean_length += f64::from(outcome.length);
@@ -157,6 +166,8 @@ impl Evaluator {
         report.mean_final_distance /= n;
         report.mean_length /= n;
         report.mean_return /= n;
+        report.mean_final_path_distance = (!path_distances.is_empty())
+            .then(|| path_distances.iter().sum::<f64>() / path_distances.len() as f64);
         Ok(report)
     }
 

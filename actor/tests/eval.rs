@@ -68,6 +68,22 @@ fn evaluation_is_reproducible_and_its_report_is_consistent() {
         .sum::<f64>()
         / 3.0;
     assert!((ra.mean_final_distance - dist).abs() < 1e-6);
+    // The distance along the maze, from the final positions by hand: cells of the code's
+    // lookup, BFS between them (the maze tests check both), × the cell size.
+    let maze = a.maze().expect("a maze task");
+    let along: Vec<f64> = ra
+        .trajectories
+        .iter()
+        .zip(&ra.goals)
+        .filter_map(|(p, g)| {
+            let (from, to) = (maze.cell_of(*p.last().unwrap())?, maze.cell_of(*g)?);
+            maze.path_distance(from, to)
+                .map(|cells| f64::from(cells) * f64::from(maze.cell_size_m()))
+        })
+        .collect();
+    assert!(!along.is_empty());
+    let mean_along = along.iter().sum::<f64>() / along.len() as f64;
+    assert_eq!(ra.mean_final_path_distance, Some(mean_along));
     // Episodes that did not succeed ran to the time limit.
     for path in &ra.trajectories {
         assert!(path.len() - 1 <= 60);

@@ -215,6 +215,38 @@ fn bfs_path_distances_on_u_match_hand_computed_values() {
 }
 
 #[test]
+fn path_distances_in_metres_on_u_follow_the_maze_not_the_straight_line() {
+    let maze = Maze::new(MazeLayout::U);
+    let goal = maze.test_goal();
+    assert_eq!(goal, [0.0, 8.0]);
+    // Start to test goal: 6 cells of 4 m, where the straight line is 8 m.
+    assert_eq!(maze.path_distance_m([0.0, 0.0], goal), Some(24.0));
+    assert_eq!(
+        maze.path_distance_m([8.9, 0.3], goal),
+        Some(16.0),
+        "end of the first corridor"
+    );
+    assert_eq!(
+        maze.path_distance_m([8.0, 4.0], goal),
+        Some(12.0),
+        "the right column"
+    );
+    assert_eq!(maze.path_distance_m([4.5, 7.0], goal), Some(4.0));
+    assert_eq!(
+        maze.path_distance_m([0.5, 9.9], goal),
+        Some(0.0),
+        "the goal's cell"
+    );
+    assert_eq!(maze.path_distance_m([0.0, 4.0], goal), None, "a wall cell");
+    assert_eq!(
+        maze.path_distance_m([100.0, 0.0], goal),
+        None,
+        "outside the grid"
+    );
+    assert_eq!(maze.path_distance_m([f32::NAN, 0.0], goal), None);
+}
+
+#[test]
 fn bfs_path_distance_across_four_rooms_goes_through_the_doors() {
     let maze = Maze::new(MazeLayout::FourRooms);
     // Start (2, 2) → goal (9, 9): Manhattan distance 14, and a door-respecting path of that

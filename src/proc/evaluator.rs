@@ -177,7 +177,7 @@ pub fn eval_metrics(
     skipped: u64,
     rejected: u64,
 ) -> Vec<(String, f64)> {
-    vec![
+    let mut values = vec![
         ("eval/success_rate".to_owned(), report.success_rate),
         (
             "eval/mean_final_distance".to_owned(),
@@ -196,7 +196,11 @@ pub fn eval_metrics(
         ),
         ("eval/skipped".to_owned(), skipped as f64),
         ("eval/weights_rejected".to_owned(), rejected as f64),
-    ]
+    ];
+    if let Some(along) = report.mean_final_path_distance {
+        values.push(("eval/mean_final_path_distance".to_owned(), along));
+    }
+    values
 }
 
 /// One JSON line per evaluation in `run_dir/eval.jsonl`.
@@ -242,6 +246,7 @@ pub fn append_report(
         "n_episodes": report.n_episodes,
         "success_rate": report.success_rate,
         "mean_final_distance": report.mean_final_distance,
+        "mean_final_path_distance": report.mean_final_path_distance,
         "mean_length": report.mean_length,
         "mean_return": report.mean_return,
     });
