@@ -1,0 +1,81 @@
+#!/usr/bin/env python3
+"""How far the frontier-reaching (FR) episodes of AntMaze-U runs got, by stretch of training.
+
+    scripts/fr_outcomes.py RUN_DIR...
+
+Reads each run's metrics.jsonl (standard library only) and takes one record per finished FR
+episode of actor 0 from the `actor0/actor/fr/last_*` values (docs/METRICS.md): how its
+navigation ended (near the frontier, stuck, new phi, or still navigating when the episode
+ended) and where (`last_x`, `last_y`). Positions are measured along the U's corridor
+centreline from the start, s: (0, 0) -> (8, 0) -> (8, 8) -> (0, 8), 24 m; the test goal is at
+s = 24. Runs of builds before these metrics existed print no FR episodes.
+
+Prints, per run and stretch of training episodes: the FR episodes, the share of each outcome,
+the median s where they ended (all of them, and those still navigating at the episode's end)
+and the largest s. docs/RESULTS.md ("How far an FR episode gets") was made with it.
+"""
+import json
+import statistics
+import sys
+
+PREFIX = "actor0/actor/fr/"
+OUTCOMES = {0: "near frontier", 1: "stuck", 2: "new phi", 3: "still navigating"}
+STRETCHES = [(201, 500), (501, 1000), (1001, 1500), (1501, 2000)]
+
+
+def along_u(x, y):
+    """Distance along the U's centreline from the start to the point nearest (x, y), metres."""
+    if y < 2.0:
+        return max(min(x, 8.0), 0.0)
+    if y <= 6.0:
+        return 8.0 + y
+    return 16.0 + (8.0 - max(min(x, 8.0), 0.0))
+
+
+def fr_episodes(path):
+    """(training episode, outcome, s) of every FR episode recorded in metrics.jsonl."""
+    seen = {}
+    with open(path) as lines:
+        for line in lines:
+            try:
+                record = json.loads(line)
+            except ValueError:
+                continue  # a line cut by a kill
+            if record.get(PREFIX + "last_outcome") is None:
+                continue
+            key = int(record[PREFIX + "last_episode"])
+            if key not in seen:
+                seen[key] = (
+                    int(record["learner/schedule/train_episodes"]),
+                    int(record[PREFIX + "last_outcome"]),
+                    along_u(record[PREFIX + "last_x"], record[PREFIX + "last_y"]),
+                )
+    return list(seen.values())
+
+
+def main(run_dirs):
+    if not run_dirs:
+        print(__doc__, file=sys.stderr)
+        return 2
+    for run in run_dirs:
+        episodes = fr_episodes(f"{run}/metrics.jsonl")
+        print(f"== {run}: {len(episodes)} FR episodes with an outcome")
+        for lo, hi in STRETCHES:
+            stretch = [e for e in episodes if lo <= e[0] <= hi]
+            if not stretch:
+                continue
+            shares = " ".join(
+                f"{name} {sum(e[1] == code for e in stretch) / len(stretch):.0%}"
+                for code, name in OUTCOMES.items()
+            )
+            navigating = [e[2] for e in stretch if e[1] == 3]
+            nav_median = f"{statistics.median(navigating):.1f}" if navigating else "-"
+            print(
+                f"  {lo}-{hi}: n={len(stretch)} | {shares} | s median {statistics.median(e[2] for e in stretch):.1f} m"
+                f" (still navigating: {nav_median} m), max {max(e[2] for e in stretch):.1f} m"
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
