@@ -143,7 +143,10 @@ fn a_serial_run_stops_on_sigterm_with_a_checkpoint_and_asi_eval_evaluates_its_we
         .parse()
         .expect("a number");
     assert!((0.0..=24.0).contains(&along), "{along}");
-    assert!((along * 3.0 / 4.0 - (along * 3.0 / 4.0).round()).abs() < 1e-3, "{along}");
+    assert!(
+        (along * 3.0 / 4.0 - (along * 3.0 / 4.0).round()).abs() < 1e-3,
+        "{along}"
+    );
     assert!(
         field(&stdout, "train_episodes")
             .parse::<u64>()

@@ -125,6 +125,10 @@ pub struct ActorStats {
     pub last_episode_explore_reach_error: Option<f32>,
     /// Whether the last finished episode had a far goal.
     pub last_episode_far_goal: bool,
+    /// The observation's first two coordinates (x, y in m on the maze tasks) where the last
+    /// finished episode ended (`None` before one).
+    #[serde(default)]
+    pub last_episode_xy: Option<[f32; 2]>,
     /// Frontier-reaching counters (SPEC §6.6).
     pub frontier: FrontierStats,
     /// Where the navigation of the last finished FR episode ended (`None` before one).
@@ -277,6 +281,7 @@ impl Actor {
                 last_episode_reach_ratio: None,
                 last_episode_explore_reach_error: None,
                 last_episode_far_goal: false,
+                last_episode_xy: None,
                 frontier: FrontierStats::default(),
                 last_fr_end: None,
                 last_fr_episode: 0,
@@ -508,6 +513,7 @@ impl Actor {
             stats.last_episode_return = episode.episode_return;
             stats.last_episode_success = episode.success;
             stats.last_episode_far_goal = episode.far_goal;
+            stats.last_episode_xy = episode.xy();
             stats.reach_error_sum += episode.reach_all.sum;
             stats.n_reach_segments += episode.reach_all.n;
             stats.explore_reach_error_sum += episode.reach_explore.sum;

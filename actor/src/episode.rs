@@ -405,6 +405,15 @@ impl Episode {
 
     /// For an FR episode, where its navigation ended: at its switch or new φ, else here
     /// ([`FrOutcome::Navigating`], at the last state); `None` for other episodes.
+    /// The first two coordinates of the current observation (x, y on the maze tasks); `None`
+    /// for an observation shorter than two.
+    pub(crate) fn xy(&self) -> Option<[f32; 2]> {
+        match self.obs.as_slice() {
+            [x, y, ..] => Some([*x, *y]),
+            _ => None,
+        }
+    }
+
     pub fn frontier_end(&self) -> Option<FrEnd> {
         let fr = self.frontier.as_ref()?;
         Some(

@@ -632,3 +632,26 @@ fn a_start_at_episode_0_is_a_fresh_actor_and_a_later_start_draws_other_noise() {
         "the generator of a later start is a stream of its own"
     );
 }
+
+#[test]
+fn the_last_episodes_end_position_is_its_last_next_observation() {
+    let mut actor = Actor::new(&config(30, 100), ActorId(0), 4).unwrap();
+    assert_eq!(
+        actor.stats().last_episode_xy,
+        None,
+        "no episode finished yet"
+    );
+    let second = episodes(&mut actor, 2).pop().unwrap();
+    let records = records_of(&second);
+    let (first, last) = (&records[0], records.last().unwrap());
+    assert!(last.truncated);
+    assert_eq!(
+        actor.stats().last_episode_xy,
+        Some([last.next_obs[0], last.next_obs[1]])
+    );
+    assert_ne!(
+        actor.stats().last_episode_xy,
+        Some([first.obs[0], first.obs[1]]),
+        "where it ended, not where it started"
+    );
+}

@@ -238,7 +238,12 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
             .into_iter()
             .map(|(name, v)| (name.to_owned(), v as f64)),
     );
+    let [x, y] = s
+        .last_episode_xy
+        .map_or([None, None], |[x, y]| [Some(x), Some(y)]);
     let optional = [
+        ("actor/last_episode_x", x),
+        ("actor/last_episode_y", y),
         ("actor/last_episode_reach_error", s.last_episode_reach_error),
         ("actor/last_episode_reach_ratio", s.last_episode_reach_ratio),
         (
