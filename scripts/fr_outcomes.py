@@ -12,7 +12,10 @@ s = 24. Runs of builds before these metrics existed print no FR episodes.
 
 Prints, per run and stretch of training episodes: the FR episodes, the share of each outcome,
 the median s where they ended (all of them, and those still navigating at the episode's end)
-and the largest s. docs/RESULTS.md ("How far an FR episode gets") was made with it.
+and the largest s. Runs whose lines carry `actor0/actor/last_episode_x/y` (builds from
+f2f9192 on) also get where every episode ended, ordinary and FR episodes apart (an episode is
+FR when `actor/fr/last_episode` equals `actor/episodes` on its line). docs/RESULTS.md ("How far
+an FR episode gets") was made with it.
 """
 import json
 import statistics
@@ -53,6 +56,32 @@ def fr_episodes(path):
     return list(seen.values())
 
 
+def episode_ends(path):
+    """(training episode, was FR, s) of every episode whose end position is recorded."""
+    seen = {}
+    with open(path) as lines:
+        for line in lines:
+            try:
+                record = json.loads(line)
+            except ValueError:
+                continue
+            if record.get("actor0/actor/last_episode_x") is None:
+                continue
+            key = int(record["actor0/actor/episodes"])
+            if key not in seen:
+                fr = record.get(PREFIX + "last_episode") == record["actor0/actor/episodes"]
+                seen[key] = (
+                    int(record["learner/schedule/train_episodes"]),
+                    fr,
+                    along_u(record["actor0/actor/last_episode_x"], record["actor0/actor/last_episode_y"]),
+                )
+    return list(seen.values())
+
+
+def median_or_dash(values):
+    return f"{statistics.median(values):.1f} m (n={len(values)})" if values else "-"
+
+
 def main(run_dirs):
     if not run_dirs:
         print(__doc__, file=sys.stderr)
@@ -74,6 +103,15 @@ def main(run_dirs):
                 f"  {lo}-{hi}: n={len(stretch)} | {shares} | s median {statistics.median(e[2] for e in stretch):.1f} m"
                 f" (still navigating: {nav_median} m), max {max(e[2] for e in stretch):.1f} m"
             )
+        ends = episode_ends(f"{run}/metrics.jsonl")
+        if ends:
+            print(f"  where episodes ended ({len(ends)} recorded), median s:")
+        for lo, hi in STRETCHES:
+            stretch = [e for e in ends if lo <= e[0] <= hi]
+            if stretch:
+                ordinary = [e[2] for e in stretch if not e[1]]
+                fr = [e[2] for e in stretch if e[1]]
+                print(f"  {lo}-{hi}: ordinary {median_or_dash(ordinary)}, FR {median_or_dash(fr)}")
     return 0
 
 
