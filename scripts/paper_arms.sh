@@ -18,7 +18,9 @@
 # them (before commit 35c4e55 the learner filled it only with SI on, and an SI arm forked from
 # an SI-off prefix started with a buffer missing the prefix's episodes).
 #
-# Environment: ASI_BIN (default target/release/asi, built if missing), FR_START (200) and
+# Environment: ARMS (default "asi asi-no-fr asi-no-si hess": the arms run to EPISODES; e.g.
+# ARMS="asi hess" leaves the ablations at their fork points), ASI_BIN (default
+# target/release/asi, built if missing), FR_START (200) and
 # SI_START (300) must equal the config's asi.fr_start_episode / asi.si_start_episode, JOBS (2)
 # arms run at once, NICE (19) their priority, CKPT_MINS (10) minutes between checkpoints
 # (run.checkpoint_interval_mins; they do not change the results). Re-running resumes every
@@ -38,11 +40,18 @@ jobs=${JOBS:-2}
 nice_level=${NICE:-19}
 ckpt_mins=${CKPT_MINS:-10}
 bin=${ASI_BIN:-target/release/asi}
+read -r -a arms <<<"${ARMS:-asi asi-no-fr asi-no-si hess}"
 
 if (( episodes <= si_start || si_start <= fr_start )); then
     echo "need FR_START ($fr_start) < SI_START ($si_start) < EPISODES ($episodes)" >&2
     exit 2
 fi
+for arm in "${arms[@]}"; do
+    case $arm in
+        asi | asi-no-fr | asi-no-si | hess) ;;
+        *) echo "unknown arm '$arm' in ARMS (asi, asi-no-fr, asi-no-si, hess)" >&2; exit 2 ;;
+    esac
+done
 if [[ ! -x $bin ]]; then
     cargo build --release
 fi
@@ -115,12 +124,12 @@ run "$fr_on" asi "$si_start" &
 run "$fr_off" asi-no-fr "$si_start" &
 wait
 
-fork "$fr_on" "$out/asi-no-si_s$seed"
-fork "$fr_off" "$out/hess_s$seed"
-# The four arms to EPISODES, JOBS at a time.
-for arm in asi asi-no-fr asi-no-si hess; do
+[[ " ${arms[*]} " == *" asi-no-si "* ]] && fork "$fr_on" "$out/asi-no-si_s$seed"
+[[ " ${arms[*]} " == *" hess "* ]] && fork "$fr_off" "$out/hess_s$seed"
+# The arms to EPISODES, JOBS at a time.
+for arm in "${arms[@]}"; do
     while (( $(jobs -rp | wc -l) >= jobs )); do wait -n; done
     run "$out/${arm}_s$seed" "$arm" "$episodes" &
 done
 wait
-echo "$(date -u +%T) seed $seed: all arms at $episodes episodes in $out"
+echo "$(date -u +%T) seed $seed: ${arms[*]} at $episodes episodes in $out"
