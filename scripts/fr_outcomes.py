@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """How far the frontier-reaching (FR) episodes of AntMaze-U runs got, by stretch of training.
 
-    scripts/fr_outcomes.py RUN_DIR...
+    scripts/fr_outcomes.py [--stretches A-B,C-D,...] RUN_DIR...
 
 Reads each run's metrics.jsonl (standard library only) and takes one record per finished FR
 episode of actor 0 from the `actor0/actor/fr/last_*` values (docs/METRICS.md): how its
@@ -12,7 +12,9 @@ s = 24. Runs of builds before these metrics existed print no FR episodes.
 
 Prints, per run and stretch of training episodes: the FR episodes, the share of each outcome,
 the median s where they ended (all of them, and those still navigating at the episode's end)
-and the largest s. Runs whose lines carry `actor0/actor/last_episode_x/y` (builds from
+and the largest s. Stretches default to 201-500, 501-1000, 1001-1500, 1501-2000 (the
+reference schedule with 500-step episodes); `--stretches 101-250,251-500,...` for
+configs/antmaze-u-1000.toml, whose episodes are twice as long. Runs whose lines carry `actor0/actor/last_episode_x/y` (builds from
 f2f9192 on) also get where every episode ended, ordinary and FR episodes apart (an episode is
 FR when `actor/fr/last_episode` equals `actor/episodes` on its line). docs/RESULTS.md ("How far
 an FR episode gets") was made with it.
@@ -82,14 +84,34 @@ def median_or_dash(values):
     return f"{statistics.median(values):.1f} m (n={len(values)})" if values else "-"
 
 
-def main(run_dirs):
+def parse_stretches(text):
+    """`A-B,C-D` -> [(A, B), (C, D)]; SystemExit with a message on anything else."""
+    stretches = []
+    for part in text.split(","):
+        try:
+            lo, hi = (int(v) for v in part.split("-"))
+        except ValueError:
+            sys.exit(f"--stretches: '{part}' is not FIRST-LAST (e.g. 101-250)")
+        if lo > hi:
+            sys.exit(f"--stretches: '{part}' ends before it starts")
+        stretches.append((lo, hi))
+    return stretches
+
+
+def main(args):
+    stretches = STRETCHES
+    if args[:1] == ["--stretches"]:
+        if len(args) < 2:
+            sys.exit("--stretches needs a value, e.g. 101-250,251-500")
+        stretches, args = parse_stretches(args[1]), args[2:]
+    run_dirs = args
     if not run_dirs:
         print(__doc__, file=sys.stderr)
         return 2
     for run in run_dirs:
         episodes = fr_episodes(f"{run}/metrics.jsonl")
         print(f"== {run}: {len(episodes)} FR episodes with an outcome")
-        for lo, hi in STRETCHES:
+        for lo, hi in stretches:
             stretch = [e for e in episodes if lo <= e[0] <= hi]
             if not stretch:
                 continue
@@ -106,7 +128,7 @@ def main(run_dirs):
         ends = episode_ends(f"{run}/metrics.jsonl")
         if ends:
             print(f"  where episodes ended ({len(ends)} recorded), median s:")
-        for lo, hi in STRETCHES:
+        for lo, hi in stretches:
             stretch = [e for e in ends if lo <= e[0] <= hi]
             if stretch:
                 ordinary = [e[2] for e in stretch if not e[1]]

@@ -1,0 +1,138 @@
+#!/usr/bin/env python3
+"""One metric of several arms and seeds, by training episode, with paired differences.
+
+    scripts/arm_table.py --at 150,200,300 [--metric M] [--base ARM] [--over A-B] RUN_DIR...
+
+Runs are grouped into arms by folder name without the `_s<seed>` tag, as `asi plot` does
+(runs/ant-u/asi_s0 and runs/ant-u/asi_s1 are seeds 0 and 1 of arm `asi`). For every arm it
+prints the metric (default `learner/charts/coverage`) at each episode of `--at`: the value on
+the first metrics.jsonl line whose `learner/schedule/train_episodes` reaches that episode,
+the mean over the seeds in bold and each seed in brackets, as the tables of docs/RESULTS.md.
+With `--base ARM` (e.g. hess) it adds, for every other arm, the paired difference arm − base
+(same seed) at each episode, mean ± sample standard deviation over the seeds both arms have,
+and over `--over A-B` (default: the first to the last episode of `--at`) the mean paired
+difference of the per-episode values and the number of episodes where the seed mean of the
+arm is above the base's. Standard library only; a run that has not reached an episode shows
+`-` there.
+"""
+import argparse
+import json
+import re
+import statistics
+import sys
+from collections import defaultdict
+
+
+def per_episode(path, metric):
+    """{training episode: metric value} from the first line that reached each episode."""
+    values = {}
+    with open(path) as lines:
+        for line in lines:
+            try:
+                record = json.loads(line)
+            except ValueError:
+                continue  # a line cut by a kill
+            episode = record.get("learner/schedule/train_episodes")
+            value = record.get(metric)
+            if episode is None or value is None:
+                continue
+            episode = int(episode)
+            if episode not in values:
+                values[episode] = float(value)
+    return values
+
+
+def at_or_after(values, episode):
+    """The value of the first recorded episode >= `episode`, or None."""
+    later = [e for e in values if e >= episode]
+    return values[min(later)] if later else None
+
+
+def fill(values, lo, hi):
+    """Per-episode values over [lo, hi] by the rule of `at_or_after`, up to the last recorded
+    episode (a line can cover several episodes when they are shorter than the metrics
+    interval)."""
+    out, following = {}, None
+    for episode in range(min(hi, max(values, default=lo - 1)), lo - 1, -1):
+        if episode in values:
+            following = values[episode]
+        if following is not None:
+            out[episode] = following
+    return out
+
+
+def mean_sd(xs):
+    if not xs:
+        return "-"
+    sd = statistics.stdev(xs) if len(xs) > 1 else 0.0
+    return f"{statistics.mean(xs):+.3f} ± {sd:.3f}"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("runs", nargs="+", metavar="RUN_DIR")
+    parser.add_argument("--at", required=True, help="episodes, comma separated")
+    parser.add_argument("--metric", default="learner/charts/coverage")
+    parser.add_argument("--base", help="arm the others are paired against (e.g. hess)")
+    parser.add_argument("--over", help="episode range FIRST-LAST for the whole-run figures")
+    args = parser.parse_args()
+    try:
+        at = [int(e) for e in args.at.split(",")]
+        lo, hi = (int(v) for v in args.over.split("-")) if args.over else (at[0], at[-1])
+    except ValueError:
+        parser.error("--at takes episodes like 150,200 and --over a range like 101-500")
+
+    arms = defaultdict(dict)  # arm -> seed -> {episode: value}
+    for run in args.runs:
+        name = run.rstrip("/").split("/")[-1]
+        match = re.fullmatch(r"(.*)_s(\d+)", name)
+        arm, seed = (match.group(1), int(match.group(2))) if match else (name, 0)
+        arms[arm][seed] = per_episode(f"{run}/metrics.jsonl", args.metric)
+    if args.base and args.base not in arms:
+        parser.error(f"--base {args.base}: no run of that arm among {sorted(arms)}")
+
+    print(f"{args.metric}, mean over seeds (seeds in brackets), by training episode")
+    print("| arm | " + " | ".join(str(e) for e in at) + " |")
+    for arm, seeds in arms.items():
+        cells = []
+        for episode in at:
+            vals = [at_or_after(seeds[s], episode) for s in sorted(seeds)]
+            got = [v for v in vals if v is not None]
+            each = " / ".join("-" if v is None else f"{v:.3f}" for v in vals)
+            cells.append(f"**{statistics.mean(got):.3f}** ({each})" if got else "-")
+        print(f"| {arm} (seeds {', '.join(map(str, sorted(seeds)))}) | " + " | ".join(cells) + " |")
+    if not args.base:
+        return 0
+
+    base = arms[args.base]
+    print(f"\npaired difference arm − {args.base} (mean ± sd over seeds)")
+    print("| arm | " + " | ".join(str(e) for e in at) + f" | mean over {lo}–{hi} | episodes above |")
+    for arm, seeds in arms.items():
+        if arm == args.base:
+            continue
+        common = sorted(set(seeds) & set(base))
+        cells = []
+        for episode in at:
+            diffs = []
+            for s in common:
+                a, b = at_or_after(seeds[s], episode), at_or_after(base[s], episode)
+                if a is not None and b is not None:
+                    diffs.append(a - b)
+            cells.append(mean_sd(diffs))
+        run_means, above, counted = [], 0, 0
+        filled = {s: (fill(seeds[s], lo, hi), fill(base[s], lo, hi)) for s in common}
+        for s, (a, b) in filled.items():
+            shared = sorted(set(a) & set(b))
+            if shared:
+                run_means.append(statistics.mean(a[e] - b[e] for e in shared))
+        for episode in range(lo, hi + 1):
+            pairs = [(a[episode], b[episode]) for a, b in filled.values() if episode in a and episode in b]
+            if len(pairs) == len(common) and pairs:
+                counted += 1
+                above += statistics.mean(p[0] - p[1] for p in pairs) > 1e-12  # not float noise
+        print(f"| {arm} | " + " | ".join(cells) + f" | {mean_sd(run_means)} | {above} of {counted} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
