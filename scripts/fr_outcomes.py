@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """How far the frontier-reaching (FR) episodes of AntMaze-U runs got, by stretch of training.
 
-    scripts/fr_outcomes.py [--stretches A-B,C-D,...] RUN_DIR...
+    scripts/fr_outcomes.py [--stretches A-B,C-D,...] [--gain] RUN_DIR...
 
 Reads each run's metrics.jsonl (standard library only) and takes one record per finished FR
 episode of actor 0 from the `actor0/actor/fr/last_*` values (docs/METRICS.md): how its
@@ -18,6 +18,11 @@ configs/antmaze-u-1000.toml, whose episodes are twice as long. Runs whose lines 
 f2f9192 on) also get where every episode ended, ordinary and FR episodes apart (an episode is
 FR when `actor/fr/last_episode` equals `actor/episodes` on its line). docs/RESULTS.md ("How far
 an FR episode gets") was made with it.
+
+`--gain` also prints, per stretch, the mean coverage each episode added
+(`learner/charts/coverage` minus the previous line's, for lines one actor-0 episode apart),
+FR episodes (those where `actor/fr/episodes` grew) and ordinary ones apart, and their ratio:
+how much an FR episode is worth in exploration. Serial runs (one actor) only.
 """
 import json
 import statistics
@@ -25,6 +30,7 @@ import sys
 
 PREFIX = "actor0/actor/fr/"
 OUTCOMES = {0: "near frontier", 1: "stuck", 2: "new phi", 3: "still navigating"}
+COVERAGE = "learner/charts/coverage"
 STRETCHES = [(201, 500), (501, 1000), (1001, 1500), (1501, 2000)]
 
 
@@ -80,6 +86,32 @@ def episode_ends(path):
     return list(seen.values())
 
 
+def coverage_gains(path):
+    """(training episode, was FR, coverage added) for each metrics line one episode after the last."""
+    gains, previous = [], None
+    with open(path) as lines:
+        for line in lines:
+            try:
+                record = json.loads(line)
+            except ValueError:
+                continue
+            if record.get(COVERAGE) is None or record.get("actor0/actor/episodes") is None:
+                continue
+            if previous is not None and record["actor0/actor/episodes"] == previous["actor0/actor/episodes"] + 1:
+                fr = record.get(PREFIX + "episodes", 0) > previous.get(PREFIX + "episodes", 0)
+                gains.append((
+                    int(record["learner/schedule/train_episodes"]),
+                    fr,
+                    record[COVERAGE] - previous[COVERAGE],
+                ))
+            previous = record
+    return gains
+
+
+def mean_gain(values):
+    return f"{1e3 * sum(values) / len(values):.2f}e-3 (n={len(values)})" if values else "-"
+
+
 def median_or_dash(values):
     return f"{statistics.median(values):.1f} m (n={len(values)})" if values else "-"
 
@@ -99,12 +131,20 @@ def parse_stretches(text):
 
 
 def main(args):
-    stretches = STRETCHES
-    if args[:1] == ["--stretches"]:
-        if len(args) < 2:
-            sys.exit("--stretches needs a value, e.g. 101-250,251-500")
-        stretches, args = parse_stretches(args[1]), args[2:]
-    run_dirs = args
+    stretches, gain, run_dirs = STRETCHES, False, []
+    rest = iter(args)
+    for arg in rest:
+        if arg == "--stretches":
+            value = next(rest, None)
+            if value is None:
+                sys.exit("--stretches needs a value, e.g. 101-250,251-500")
+            stretches = parse_stretches(value)
+        elif arg == "--gain":
+            gain = True
+        elif arg.startswith("-"):
+            sys.exit(f"unknown option {arg}\n{__doc__}")
+        else:
+            run_dirs.append(arg)
     if not run_dirs:
         print(__doc__, file=sys.stderr)
         return 2
@@ -134,7 +174,23 @@ def main(args):
                 ordinary = [e[2] for e in stretch if not e[1]]
                 fr = [e[2] for e in stretch if e[1]]
                 print(f"  {lo}-{hi}: ordinary {median_or_dash(ordinary)}, FR {median_or_dash(fr)}")
+        if gain:
+            print_gains(coverage_gains(f"{run}/metrics.jsonl"), stretches)
     return 0
+
+
+def print_gains(gains, stretches):
+    """Mean coverage added per FR and per ordinary episode in each stretch, and the ratio."""
+    print("  coverage added per episode:")
+    for lo, hi in stretches:
+        fr = [g for e, is_fr, g in gains if lo <= e <= hi and is_fr]
+        ordinary = [g for e, is_fr, g in gains if lo <= e <= hi and not is_fr]
+        if not fr and not ordinary:
+            continue
+        ratio = "-"
+        if fr and ordinary and sum(ordinary) > 0:
+            ratio = f"{(sum(fr) / len(fr)) / (sum(ordinary) / len(ordinary)):.1f}"
+        print(f"  {lo}-{hi}: FR {mean_gain(fr)}, ordinary {mean_gain(ordinary)}, FR/ordinary {ratio}")
 
 
 if __name__ == "__main__":

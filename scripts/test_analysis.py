@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py) on hand-built inputs.
+
+    python3 scripts/test_analysis.py
+
+Standard library only; .ci/run runs it when python3 is installed. Every expected figure is
+computed by hand in the comments.
+"""
+import json
+import os
+import sys
+import tempfile
+import unittest
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import fr_outcomes  # noqa: E402
+import fr_trace  # noqa: E402
+
+
+def decision(episode, t, xy, phi, choice, subgoal, switch="None"):
+    """One actor debug line, with the colour codes tracing puts around field names."""
+    return (
+        f"2026-12-02T19:45:56Z \x1b[34mDEBUG\x1b[0m actor::episode: FR decision "
+        f"\x1b[3mepisode\x1b[0m\x1b[2m=\x1b[0m{episode} t={t} xy=Some([{xy[0]}, {xy[1]}]) "
+        f"phi=[{phi[0]}, {phi[1]}] choice={choice} subgoal=[{subgoal[0]}, {subgoal[1]}] "
+        f"switch={switch} route_len=9\n"
+    )
+
+
+def waypoint(k, index):
+    return f"Waypoint {{ k: {k}, index: Some({index}) }}"
+
+
+class TraceSegments(unittest.TestCase):
+    def setUp(self):
+        lines = [
+            # Episode 1: φ (0, 0) -> (3, 4) -> (6, 8), waypoints at route indices 4 then 5.
+            decision(1, 0, (0.0, 0.0), (0.0, 0.0), waypoint(4, 4), (6.0, 8.0)),
+            decision(1, 20, (0.3, 0.4), (3.0, 4.0), waypoint(4, 5), (8.0, 8.0)),
+            # A count-mode decision after the switch: starts no navigation segment.
+            decision(1, 40, (0.6, 0.8), (6.0, 8.0), "Count { fallback: false }", (1.0, 1.0), "Some(Stuck)"),
+            decision(1, 60, (0.6, 0.8), (6.0, 8.0), "Count { fallback: false }", (1.0, 1.0)),
+            # Episode 2: one segment that moves away from its waypoint (12 units away).
+            decision(2, 0, (0.0, 0.0), (0.0, 0.0), waypoint(3, 3), (12.0, 0.0)),
+            decision(2, 20, (-0.1, 0.0), (-1.0, 0.0), "Count { fallback: false }", (0.0, 0.0), "Some(Stuck)"),
+            "an unrelated log line\n",
+        ]
+        handle = tempfile.NamedTemporaryFile("w", suffix=".log", delete=False)
+        handle.writelines(lines)
+        handle.close()
+        self.path = handle.name
+
+    def tearDown(self):
+        os.unlink(self.path)
+
+    def test_segments(self):
+        rows = sorted(fr_trace.segments(fr_trace.decisions(self.path)))
+        # Episode 1, t=0: start |(0,0)-(6,8)| = 10, end |(3,4)-(6,8)| = 5: ratio 0.5, φ moved 5,
+        # xy moved 0.5, closed 5. t=20: start |(3,4)-(8,8)| = √41, end |(6,8)-(8,8)| = 2.
+        # Episode 2: start 12, end 13: ratio 13/12, φ moved 1, xy 0.1, closed -1.
+        # The count decisions (t=40 of episode 1) start no segment.
+        self.assertEqual(len(rows), 3)
+        expected = [
+            (41 ** 0.5, 2 / 41 ** 0.5, 5.0, 0.5, 41 ** 0.5 - 2),
+            (10.0, 0.5, 5.0, 0.5, 5.0),
+            (12.0, 13 / 12, 1.0, 0.1, -1.0),
+        ]
+        for row, want in zip(rows, expected):
+            for got, value in zip(row, want):
+                self.assertAlmostEqual(got, value, places=5)
+
+    def test_route_hops(self):
+        # Episode 1 saw indices 4 -> (6, 8) and 5 -> (8, 8): one hop of length 2. Episode 2 saw
+        # one index only.
+        self.assertEqual(fr_trace.route_hops(fr_trace.decisions(self.path)), [2.0])
+
+    def test_walks_stop_at_the_switch(self):
+        walks = fr_trace.walks(self.path)
+        # Episode 1's walk ends at the stuck switch at t=40; the later count decision is dropped.
+        self.assertEqual([d[0] for d in walks[1]], [0, 20, 40])
+        self.assertEqual(walks[1][-1][3], "Stuck")
+
+
+class CoverageGains(unittest.TestCase):
+    def test_gains_split_fr_and_ordinary(self):
+        records = [
+            # (train episode, actor episodes, FR episodes, coverage)
+            (1, 1, 0, 0.10),
+            (2, 2, 1, 0.13),   # FR, +0.03
+            (3, 3, 1, 0.14),   # ordinary, +0.01
+            (5, 5, 1, 0.20),   # two episodes apart: skipped
+            (6, 6, 2, 0.25),   # FR, +0.05
+        ]
+        handle = tempfile.NamedTemporaryFile("w", suffix=".jsonl", delete=False)
+        for train, episodes, fr, coverage in records:
+            handle.write(json.dumps({
+                "learner/schedule/train_episodes": train,
+                "actor0/actor/episodes": episodes,
+                "actor0/actor/fr/episodes": fr,
+                "learner/charts/coverage": coverage,
+            }) + "\n")
+        handle.write("{cut by a kill\n")
+        handle.close()
+        try:
+            gains = fr_outcomes.coverage_gains(handle.name)
+        finally:
+            os.unlink(handle.name)
+        self.assertEqual([(e, fr) for e, fr, _ in gains], [(2, True), (3, False), (6, True)])
+        for (_, _, got), want in zip(gains, [0.03, 0.01, 0.05]):
+            self.assertAlmostEqual(got, want, places=9)
+
+    def test_along_u(self):
+        # The U's centreline: (0,0) -> (8,0) -> (8,8) -> (0,8).
+        self.assertEqual(fr_outcomes.along_u(4.0, 0.5), 4.0)
+        self.assertEqual(fr_outcomes.along_u(8.5, 4.0), 12.0)
+        self.assertEqual(fr_outcomes.along_u(2.0, 8.0), 22.0)
+
+
+if __name__ == "__main__":
+    unittest.main()
