@@ -43,68 +43,63 @@ def along_u(x, y):
     return 16.0 + (8.0 - max(min(x, 8.0), 0.0))
 
 
-def fr_episodes(path):
-    """(training episode, outcome, s) of every FR episode recorded in metrics.jsonl."""
-    seen = {}
+def records(path):
+    """The JSON objects of metrics.jsonl, skipping a line cut by a kill."""
     with open(path) as lines:
         for line in lines:
             try:
-                record = json.loads(line)
+                yield json.loads(line)
             except ValueError:
-                continue  # a line cut by a kill
-            if record.get(PREFIX + "last_outcome") is None:
                 continue
-            key = int(record[PREFIX + "last_episode"])
-            if key not in seen:
-                seen[key] = (
-                    int(record["learner/schedule/train_episodes"]),
-                    int(record[PREFIX + "last_outcome"]),
-                    along_u(record[PREFIX + "last_x"], record[PREFIX + "last_y"]),
-                )
+
+
+def fr_episodes(path):
+    """(training episode, outcome, s) of every FR episode recorded in metrics.jsonl."""
+    seen = {}
+    for record in records(path):
+        if record.get(PREFIX + "last_outcome") is None:
+            continue
+        key = int(record[PREFIX + "last_episode"])
+        if key not in seen:
+            seen[key] = (
+                int(record["learner/schedule/train_episodes"]),
+                int(record[PREFIX + "last_outcome"]),
+                along_u(record[PREFIX + "last_x"], record[PREFIX + "last_y"]),
+            )
     return list(seen.values())
 
 
 def episode_ends(path):
     """(training episode, was FR, s) of every episode whose end position is recorded."""
     seen = {}
-    with open(path) as lines:
-        for line in lines:
-            try:
-                record = json.loads(line)
-            except ValueError:
-                continue
-            if record.get("actor0/actor/last_episode_x") is None:
-                continue
-            key = int(record["actor0/actor/episodes"])
-            if key not in seen:
-                fr = record.get(PREFIX + "last_episode") == record["actor0/actor/episodes"]
-                seen[key] = (
-                    int(record["learner/schedule/train_episodes"]),
-                    fr,
-                    along_u(record["actor0/actor/last_episode_x"], record["actor0/actor/last_episode_y"]),
-                )
+    for record in records(path):
+        if record.get("actor0/actor/last_episode_x") is None:
+            continue
+        key = int(record["actor0/actor/episodes"])
+        if key not in seen:
+            fr = record.get(PREFIX + "last_episode") == record["actor0/actor/episodes"]
+            seen[key] = (
+                int(record["learner/schedule/train_episodes"]),
+                fr,
+                along_u(record["actor0/actor/last_episode_x"], record["actor0/actor/last_episode_y"]),
+            )
     return list(seen.values())
 
 
 def coverage_gains(path):
     """(training episode, was FR, coverage added) for each metrics line one episode after the last."""
     gains, previous = [], None
-    with open(path) as lines:
-        for line in lines:
-            try:
-                record = json.loads(line)
-            except ValueError:
-                continue
-            if record.get(COVERAGE) is None or record.get("actor0/actor/episodes") is None:
-                continue
-            if previous is not None and record["actor0/actor/episodes"] == previous["actor0/actor/episodes"] + 1:
-                fr = record.get(PREFIX + "episodes", 0) > previous.get(PREFIX + "episodes", 0)
-                gains.append((
-                    int(record["learner/schedule/train_episodes"]),
-                    fr,
-                    record[COVERAGE] - previous[COVERAGE],
-                ))
-            previous = record
+    for record in records(path):
+        if record.get(COVERAGE) is None or record.get("actor0/actor/episodes") is None:
+            continue
+        if previous is not None and record["actor0/actor/episodes"] == previous["actor0/actor/episodes"] + 1:
+            fr = record.get(PREFIX + "episodes", 0) > previous.get(PREFIX + "episodes", 0)
+            gains.append((
+                int(record["learner/schedule/train_episodes"]),
+                fr,
+                record[COVERAGE] - previous[COVERAGE],
+            ))
+        previous = record
     return gains
 
 

@@ -37,19 +37,24 @@ DECISION = re.compile(
 )
 
 
+def matches(path, pattern):
+    """The matches of `pattern` in the log's lines, colour codes removed."""
+    with open(path, errors="replace") as lines:
+        for line in lines:
+            found = pattern.search(ANSI.sub("", line))
+            if found:
+                yield found
+
+
 def walks(path):
     """{episode: [(t, x, y, switch or None), ...]} up to and including the first switch."""
     episodes = {}
-    with open(path, errors="replace") as lines:
-        for line in lines:
-            found = DECISION.search(ANSI.sub("", line))
-            if not found:
-                continue
-            episode = int(found[1])
-            decisions = episodes.setdefault(episode, [])
-            if decisions and decisions[-1][3] is not None:
-                continue  # count mode after the switch: not navigation
-            decisions.append((int(found[2]), float(found[3]), float(found[4]), found[6]))
+    for found in matches(path, DECISION):
+        episode = int(found[1])
+        decisions = episodes.setdefault(episode, [])
+        if decisions and decisions[-1][3] is not None:
+            continue  # count mode after the switch: not navigation
+        decisions.append((int(found[2]), float(found[3]), float(found[4]), found[6]))
     return episodes
 
 
@@ -65,19 +70,15 @@ LAST_BIN = 20.0  # everything from here on is one bin
 def decisions(path):
     """{(episode, t): (choice, route index or None, xy, φ, subgoal)} of every FR decision."""
     found_all = {}
-    with open(path, errors="replace") as lines:
-        for line in lines:
-            found = SEGMENT.search(ANSI.sub("", line))
-            if not found:
-                continue
-            episode, t, x, y, px, py, choice, index, sx, sy = found.groups()
-            found_all[(int(episode), int(t))] = (
-                choice,
-                None if index is None else int(index),
-                (float(x), float(y)),
-                (float(px), float(py)),
-                (float(sx), float(sy)),
-            )
+    for found in matches(path, SEGMENT):
+        episode, t, x, y, px, py, choice, index, sx, sy = found.groups()
+        found_all[(int(episode), int(t))] = (
+            choice,
+            None if index is None else int(index),
+            (float(x), float(y)),
+            (float(px), float(py)),
+            (float(sx), float(sy)),
+        )
     return found_all
 
 
