@@ -153,7 +153,8 @@ pub(crate) struct Episode {
     segment_source: Option<SubgoalSource>,
     /// ‖subgoal − φ(s_t)‖ at the segment's decision; `None` after a φ change mid-segment.
     segment_start_distance: Option<f32>,
-    /// Un-pushed candidate of the explore segment in progress.
+    /// Un-pushed candidate of the explore segment in progress; `None` when the segment
+    /// reports no reaching sample (not graph-chosen, or FR with `asi.fr_feeds_potential` off).
     candidate: Option<LatentPoint>,
     obs: Vec<f32>,
     phi: Vec<f32>,
@@ -369,7 +370,7 @@ impl Episode {
         };
         self.segment_source = Some(source);
         self.segment_start_distance = Some(self.subgoal_distance());
-        self.candidate = Some(decided.subgoal);
+        self.candidate = params.feeds_potential.then_some(decided.subgoal);
         rollout.decisions.n_decisions += 1;
         let stats = &mut rollout.frontier_stats;
         match decided.choice {

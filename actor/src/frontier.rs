@@ -56,6 +56,9 @@ pub struct FrontierParams {
     pub end_at_frontier: bool,
     /// The low level navigates without exploration noise (`asi.fr_noise_free_low`).
     pub noise_free_navigation: bool,
+    /// FR segments report their reaching error to the potential map
+    /// (`asi.fr_feeds_potential`).
+    pub feeds_potential: bool,
 }
 
 impl FrontierParams {
@@ -75,6 +78,7 @@ impl FrontierParams {
             abs_range: config.hierarchy.abs_range as f32,
             end_at_frontier: asi.near_frontier == NearFrontier::EndFr,
             noise_free_navigation: asi.fr_noise_free_low,
+            feeds_potential: asi.fr_feeds_potential,
         }))
     }
 }

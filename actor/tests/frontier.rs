@@ -132,6 +132,7 @@ fn params() -> FrontierParams {
         abs_range: 10.0,
         end_at_frontier: false,
         noise_free_navigation: true,
+        feeds_potential: true,
     }
 }
 
@@ -910,4 +911,36 @@ fn with_fr_noise_free_low_off_navigation_keeps_the_exploration_noise() {
         low_actions_with(0.1, 0.0, 1.0, false),
         low_actions_with(0.5, 0.3, 1.0, false)
     );
+}
+
+#[test]
+fn fr_segments_feed_the_potential_unless_switched_off() {
+    let mut config = config();
+    config.asi.stuck_threshold = 0.0; // every decision navigates
+    let run = |config: &Config| {
+        let mut actor = actor(config, 7, 1.0);
+        let mut oracle = ScriptedOracle::new(straight_route);
+        let decided = decisions(&episode(&mut actor, &mut oracle));
+        (decided, oracle.reported)
+    };
+    let (decided, reported) = run(&config);
+    assert_eq!(kinds(&decided), vec![DecisionKind::FrontierRoute; 10]);
+    // Every segment but the episode's last one: at the waypoint, the distance left at the
+    // next decision.
+    assert_eq!(reported.len(), 9);
+    for (sample, pair) in reported.iter().zip(decided.windows(2)) {
+        assert_eq!(sample.subgoal, [pair[0].subgoal[0], pair[0].subgoal[1]]);
+        let error = dist(&pair[0].subgoal, &pair[1].phi);
+        assert!(
+            (sample.error - error).abs() < 1e-5,
+            "{} vs {error}",
+            sample.error
+        );
+    }
+    config.asi.fr_feeds_potential = false;
+    let (same, none) = run(&config);
+    assert!(none.is_empty());
+    // The switch changes nothing else: the same subgoals, decision for decision.
+    let subgoals = |d: &[StepRecord]| d.iter().map(|r| r.subgoal.clone()).collect::<Vec<_>>();
+    assert_eq!(subgoals(&same), subgoals(&decided));
 }

@@ -364,6 +364,12 @@ pub struct AsiConfig {
     /// Default true. Source: code. false is an experiment (not in the paper): navigation
     /// segments keep the low level's exploration noise, as count mode does.
     pub fr_noise_free_low: bool,
+    /// FR segments (navigation and count mode) report their reaching error to HESS's
+    /// potential map, as HESS's explore segments do. Default true. Source: code (digest §5.3:
+    /// every count/FR-chosen segment). false is an experiment (not in the paper): only HESS
+    /// explore segments feed the potential, so failed FR walks toward the frontier do not
+    /// steer the ordinary episodes' explore subgoals away from it.
+    pub fr_feeds_potential: bool,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
     /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code.
@@ -432,6 +438,7 @@ impl Default for AsiConfig {
             count_mode_score: CountModeScore::GraphVisits,
             near_frontier: NearFrontier::CountMode,
             fr_noise_free_low: true,
+            fr_feeds_potential: true,
             si_start_episode: 300,
             si_alpha: 0.01,
             si_beta: 0.001,
