@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py) on hand-built inputs.
+"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py, store_reach.py) on hand-built inputs.
 
     python3 scripts/test_analysis.py
 
@@ -8,6 +8,7 @@ computed by hand in the comments.
 """
 import json
 import os
+import struct
 import sys
 import tempfile
 import unittest
@@ -16,6 +17,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import fr_outcomes  # noqa: E402
 import fr_trace  # noqa: E402
+import store_reach  # noqa: E402
 
 
 def decision(episode, t, xy, phi, choice, subgoal, switch="None"):
@@ -115,6 +117,79 @@ class CoverageGains(unittest.TestCase):
         self.assertEqual(fr_outcomes.along_u(4.0, 0.5), 4.0)
         self.assertEqual(fr_outcomes.along_u(8.5, 4.0), 12.0)
         self.assertEqual(fr_outcomes.along_u(2.0, 8.0), 22.0)
+
+
+def write_safetensors(path, tensors):
+    """A safetensors file of {name: (dtype, shape, flat values)}, little-endian."""
+    codes = {"F32": "f", "F64": "d", "I32": "i", "U64": "Q"}
+    header, blobs, offset = {}, [], 0
+    for name, (dtype, shape, values) in tensors.items():
+        blob = struct.pack(f"<{len(values)}{codes[dtype]}", *values)
+        header[name] = {"dtype": dtype, "shape": shape, "data_offsets": [offset, offset + len(blob)]}
+        blobs.append(blob)
+        offset += len(blob)
+    text = json.dumps(header).encode()
+    with open(path, "wb") as handle:
+        handle.write(struct.pack("<Q", len(text)) + text + b"".join(blobs))
+
+
+class StoreReach(unittest.TestCase):
+    def setUp(self):
+        self.run = tempfile.mkdtemp()
+        checkpoint = os.path.join(self.run, "checkpoints", "graph-service", "ckpt-000002")
+        os.makedirs(checkpoint)
+        os.makedirs(os.path.join(self.run, "checkpoints", "graph-service", "ckpt-000001"))
+        # Observations of dimension 3 (x, y, something). Stored out of order: the trajectory of
+        # episode id 1 first (3 states), then episode id 0 (2 states).
+        states = [
+            (0.1, 0.1), (8.5, 4.0), (8.5, 4.1),  # episode 2: s up to 12; cells (3,3), (17,10), (17,10)
+            (0.0, 0.0), (2.0, 3.0),              # episode 1: (3,3); (2, 3) is in the wall block
+        ]
+        obs = [v for x, y in states for v in (x, y, 9.0)]
+        latents = [0.5, 0.5, 4.0, 4.0, 4.5, 4.5, 1.0, 1.0, 2.0, 2.0]
+        write_safetensors(os.path.join(checkpoint, "store.safetensors"), {
+            "obs": ("F32", [5, 3], obs),
+            "latents": ("F32", [5, 2], latents),
+            "episode": ("U64", [2], [1, 0]),
+            "len": ("U64", [2], [3, 2]),
+        })
+        # φ-cells of side 3: (0, 0) holds states at s 0.1, 0 and 11 -> median 0.1; (1, 1) holds
+        # the two states at s 12 and 12.1 -> median 12.05; (5, 5) holds none.
+        write_safetensors(os.path.join(checkpoint, "maps.safetensors"), {
+            "potential.keys": ("I32", [3, 2], [0, 0, 1, 1, 5, 5]),
+            "potential.values": ("F64", [3], [2.0, 5.0, 7.0]),
+        })
+        with open(os.path.join(self.run, "metrics.jsonl"), "w") as handle:
+            for episodes, fr, cells in [(1, 0, 1), (2, 1, 2)]:
+                handle.write(json.dumps({
+                    "actor0/actor/episodes": episodes,
+                    "actor0/actor/fr/episodes": fr,
+                    "learner/charts/coverage_free_cells_visited": cells,
+                }) + "\n")
+        self.checkpoint = checkpoint
+
+    def tearDown(self):
+        import shutil
+        shutil.rmtree(self.run)
+
+    def test_newest_checkpoint_and_fr_episodes(self):
+        self.assertEqual(store_reach.newest_checkpoint(self.run), self.checkpoint)
+        self.assertEqual(store_reach.fr_episode_numbers(os.path.join(self.run, "metrics.jsonl")), {2})
+
+    def test_episode_figures(self):
+        rows = store_reach.episode_figures(self.checkpoint)
+        # Episode 1: reach max(along_u(0, 0), along_u(2, 3)) = 11 (a wall point still has an
+        # s); one free cell, (3,3), new. Episode 2: reach along_u(8.5, 4.1) = 12.1; free cells
+        # (3,3) and (17,10), the second new.
+        self.assertEqual([r[0] for r in rows], [1, 2])
+        self.assertEqual([r[2:] for r in rows], [(1, 1), (2, 1)])
+        self.assertAlmostEqual(rows[0][1], 11.0)
+        self.assertAlmostEqual(rows[1][1], 12.1, places=5)
+
+    def test_potential_by_s(self):
+        bins, unplaced, total = store_reach.potential_by_s(self.checkpoint)
+        self.assertEqual(bins, {0: 2.0, 12: 5.0})
+        self.assertEqual((unplaced, total), (7.0, 14.0))
 
 
 if __name__ == "__main__":
