@@ -23,7 +23,11 @@ of three figures per episode:
 - `new`: of those, cells no earlier episode of the run had entered: the episode's coverage
   gain in cells. Summed over all episodes it is `charts/coverage_free_cells_visited` of the
   run's last metrics line, which the script checks (a mismatch means the store and the metric
-  disagree, e.g. an evicted store).
+  disagree, e.g. an evicted store);
+- `new w/o FR`: cells no earlier *ordinary* episode had entered, as if the FR episodes'
+  visits did not count. For an ordinary episode of ASI against an episode of HESS (which has
+  no FR episodes, so there the two columns agree) it removes the bookkeeping: an ordinary
+  episode that found cells an FR episode had entered first gets them back.
 
 `--potential` also prints HESS's potential map (`maps.safetensors`: the summed reaching errors
 of graph-chosen segments per 3.0 φ-cell, docs/ARCHITECTURE.md) by where its cells are in the
@@ -108,8 +112,9 @@ def free_cell(x, y):
     return ix, iy
 
 
-def episode_figures(checkpoint):
-    """(episode number, reach, cells, new) per stored trajectory, in episode order."""
+def episode_figures(checkpoint, fr=frozenset()):
+    """(episode number, reach, cells, new, new w/o FR) per stored trajectory, in episode order;
+    `fr`: the FR episodes' numbers."""
     store = read_tensors(os.path.join(checkpoint, "store.safetensors"), ["obs", "episode", "len"])
     obs, (_, obs_dim) = store["obs"]
     episodes, _ = store["episode"]
@@ -118,15 +123,18 @@ def episode_figures(checkpoint):
     for length in lengths:
         starts.append(first)
         first += length
-    seen, rows = set(), []
+    seen, seen_ordinary, rows = set(), set(), []
     for index in sorted(range(len(episodes)), key=lambda i: episodes[i]):
         begin, end = starts[index], starts[index] + lengths[index]
         xy = [(obs[obs_dim * j], obs[obs_dim * j + 1]) for j in range(begin, end)]
         reach = max(along_u(x, y) for x, y in xy)
         cells = {free_cell(x, y) for x, y in xy} - {None}
-        new = len(cells - seen)
+        number = episodes[index] + 1
+        new, new_ordinary = len(cells - seen), len(cells - seen_ordinary)
         seen |= cells
-        rows.append((episodes[index] + 1, reach, len(cells), new))
+        if number not in fr:
+            seen_ordinary |= cells
+        rows.append((number, reach, len(cells), new, new_ordinary))
     return rows
 
 
@@ -167,7 +175,8 @@ def summary(rows):
     reach = sum(r[1] for r in rows) / n
     cells = sum(r[2] for r in rows) / n
     new = sum(r[3] for r in rows) / n
-    return f"n={n} reach {reach:.1f} m, cells {cells:.1f}, new {new:.2f}"
+    new_ordinary = sum(r[4] for r in rows) / n
+    return f"n={n} reach {reach:.1f} m, cells {cells:.1f}, new {new:.2f}, new w/o FR {new_ordinary:.2f}"
 
 
 def main(args):
@@ -191,7 +200,7 @@ def main(args):
     for run in run_dirs:
         checkpoint = newest_checkpoint(run)
         fr = fr_episode_numbers(os.path.join(run, "metrics.jsonl"))
-        rows = episode_figures(checkpoint)
+        rows = episode_figures(checkpoint, fr)
         print(f"== {run}: {len(rows)} stored episodes ({os.path.basename(checkpoint)}), {len(fr)} FR")
         covered = last_value(os.path.join(run, "metrics.jsonl"), "learner/charts/coverage_free_cells_visited")
         if covered is not None and covered != sum(r[3] for r in rows):

@@ -182,7 +182,11 @@ class StoreReach(unittest.TestCase):
         # s); one free cell, (3,3), new. Episode 2: reach along_u(8.5, 4.1) = 12.1; free cells
         # (3,3) and (17,10), the second new.
         self.assertEqual([r[0] for r in rows], [1, 2])
-        self.assertEqual([r[2:] for r in rows], [(1, 1), (2, 1)])
+        self.assertEqual([r[2:] for r in rows], [(1, 1, 1), (2, 1, 1)])
+        # With episode 1 an FR episode, its cell (3,3) does not count against episode 2's
+        # "new w/o FR": both of episode 2's cells are new to the ordinary episodes.
+        rows = store_reach.episode_figures(self.checkpoint, fr={1})
+        self.assertEqual([r[2:] for r in rows], [(1, 1, 1), (2, 1, 2)])
         self.assertAlmostEqual(rows[0][1], 11.0)
         self.assertAlmostEqual(rows[1][1], 12.1, places=5)
 
