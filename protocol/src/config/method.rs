@@ -365,8 +365,9 @@ pub struct AsiConfig {
     /// segments keep the low level's exploration noise, as count mode does.
     pub fr_noise_free_low: bool,
     /// FR segments (navigation and count mode) report their reaching error to HESS's
-    /// potential map, as HESS's explore segments do. Default true. Source: code (digest §5.3:
-    /// every count/FR-chosen segment). false is an experiment (not in the paper): only HESS
+    /// potential map, as HESS's explore segments do. Default true. Source: code (digest §5.3;
+    /// the code reports an FR segment only when its decision's count draw came up, here every
+    /// one reports). false is an experiment (not in the paper): only HESS
     /// explore segments feed the potential, so failed FR walks toward the frontier do not
     /// steer the ordinary episodes' explore subgoals away from it.
     pub fr_feeds_potential: bool,
