@@ -21,8 +21,8 @@ of three figures per episode:
   `charts/coverage` (docs/METRICS.md: from the goal box's low corner, (-2, -2) in AntMaze-U; a
   cell is free when its centre is outside the U's inner wall block [-2, 6] x [2, 6]);
 - `new`: of those, cells no earlier episode of the run had entered: the episode's coverage
-  gain in cells. Summed over all episodes it is `charts/coverage_free_cells_visited` of the
-  run's last metrics line, which the script checks (a mismatch means the store and the metric
+  gain in cells. Summed over all episodes it is `charts/coverage_free_cells_visited` on the
+  metrics line of the store's last episode, which the script checks (a mismatch means the store and the metric
   disagree, e.g. an evicted store);
 - `new w/o FR`: cells no earlier *ordinary* episode had entered, as if the FR episodes'
   visits did not count. For an ordinary episode of ASI against an episode of HESS (which has
@@ -161,11 +161,13 @@ def potential_by_s(checkpoint):
     return bins, unplaced, sum(values)
 
 
-def last_value(metrics, key):
-    value = None
+def value_at(metrics, key, episodes):
+    """`key` on the first line where actor 0 has finished `episodes` episodes (the store's
+    count; a run trains on past its last graph-service checkpoint), else None."""
     for record in records(metrics):
-        value = record.get(key, value)
-    return value
+        if record.get("actor0/actor/episodes") == episodes and key in record:
+            return record[key]
+    return None
 
 
 def summary(rows):
@@ -202,7 +204,7 @@ def main(args):
         fr = fr_episode_numbers(os.path.join(run, "metrics.jsonl"))
         rows = episode_figures(checkpoint, fr)
         print(f"== {run}: {len(rows)} stored episodes ({os.path.basename(checkpoint)}), {len(fr)} FR")
-        covered = last_value(os.path.join(run, "metrics.jsonl"), "learner/charts/coverage_free_cells_visited")
+        covered = value_at(os.path.join(run, "metrics.jsonl"), "learner/charts/coverage_free_cells_visited", len(rows))
         if covered is not None and covered != sum(r[3] for r in rows):
             print(f"  warning: the episodes' new cells add up to {sum(r[3] for r in rows)}, "
                   f"charts/coverage_free_cells_visited says {covered:.0f}")
