@@ -125,8 +125,10 @@ def parse_stretches(text):
     return stretches
 
 
-def main(args):
-    stretches, gain, run_dirs = STRETCHES, False, []
+def options(args, switches, stretches, usage):
+    """(stretches, the switches given, run folders) of `[--stretches A-B,...] [SWITCH...] RUN_DIR...`;
+    SystemExit with `usage` on an unknown option."""
+    given, run_dirs = set(), []
     rest = iter(args)
     for arg in rest:
         if arg == "--stretches":
@@ -134,12 +136,18 @@ def main(args):
             if value is None:
                 sys.exit("--stretches needs a value, e.g. 101-250,251-500")
             stretches = parse_stretches(value)
-        elif arg == "--gain":
-            gain = True
+        elif arg in switches:
+            given.add(arg)
         elif arg.startswith("-"):
-            sys.exit(f"unknown option {arg}\n{__doc__}")
+            sys.exit(f"unknown option {arg}\n{usage}")
         else:
             run_dirs.append(arg)
+    return stretches, given, run_dirs
+
+
+def main(args):
+    stretches, given, run_dirs = options(args, {"--gain"}, STRETCHES, __doc__)
+    gain = "--gain" in given
     if not run_dirs:
         print(__doc__, file=sys.stderr)
         return 2

@@ -45,7 +45,7 @@ import statistics
 import struct
 import sys
 
-from fr_outcomes import along_u, parse_stretches, records
+from fr_outcomes import along_u, options, records
 
 COVERAGE_CELL = 0.6
 GRID_LOW = (-2.0, -2.0)  # AntMaze-U's goal box, low corner
@@ -182,20 +182,8 @@ def summary(rows):
 
 
 def main(args):
-    stretches, potential, run_dirs = STRETCHES, False, []
-    rest = iter(args)
-    for arg in rest:
-        if arg == "--stretches":
-            value = next(rest, None)
-            if value is None:
-                sys.exit("--stretches needs a value, e.g. 101-250,251-500")
-            stretches = parse_stretches(value)
-        elif arg == "--potential":
-            potential = True
-        elif arg.startswith("-"):
-            sys.exit(f"unknown option {arg}\n{__doc__}")
-        else:
-            run_dirs.append(arg)
+    stretches, given, run_dirs = options(args, {"--potential"}, STRETCHES, __doc__)
+    potential = "--potential" in given
     if not run_dirs:
         print(__doc__, file=sys.stderr)
         return 2
