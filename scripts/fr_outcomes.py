@@ -127,7 +127,7 @@ def parse_stretches(text):
 
 def options(args, switches, stretches, usage):
     """(stretches, the switches given, run folders) of `[--stretches A-B,...] [SWITCH...] RUN_DIR...`;
-    SystemExit with `usage` on an unknown option."""
+    SystemExit with `usage` on an unknown option, and with `usage` and status 2 without a run."""
     given, run_dirs = set(), []
     rest = iter(args)
     for arg in rest:
@@ -142,15 +142,15 @@ def options(args, switches, stretches, usage):
             sys.exit(f"unknown option {arg}\n{usage}")
         else:
             run_dirs.append(arg)
+    if not run_dirs:
+        print(usage, file=sys.stderr)
+        sys.exit(2)
     return stretches, given, run_dirs
 
 
 def main(args):
     stretches, given, run_dirs = options(args, {"--gain"}, STRETCHES, __doc__)
     gain = "--gain" in given
-    if not run_dirs:
-        print(__doc__, file=sys.stderr)
-        return 2
     for run in run_dirs:
         episodes = fr_episodes(f"{run}/metrics.jsonl")
         print(f"== {run}: {len(episodes)} FR episodes with an outcome")

@@ -184,9 +184,6 @@ def summary(rows):
 def main(args):
     stretches, given, run_dirs = options(args, {"--potential"}, STRETCHES, __doc__)
     potential = "--potential" in given
-    if not run_dirs:
-        print(__doc__, file=sys.stderr)
-        return 2
     for run in run_dirs:
         checkpoint = newest_checkpoint(run)
         fr = fr_episode_numbers(os.path.join(run, "metrics.jsonl"))
