@@ -14,14 +14,18 @@
 //!   ‖subgoal − φ(s_{t+c})‖ at its end. Every such segment enters the episode's reaching
 //!   statistics; an explore segment followed by another decision (not the episode's last) also
 //!   yields a [`ReachSample`] at its un-pushed candidate, for the graph-service's potential map.
-//!   FR segments (waypoint or count mode) report the same way, at their subgoal (no push).
+//!   FR segments (waypoint or count mode) report the same way, at their subgoal (no push), when
+//!   `asi.fr_potential_reports` picks them: by default those whose decision's count draw
+//!   (probability `count_prob`, the decision's last random number) came up.
 //! - Frontier-reaching episodes ([`crate::frontier`]): while FR mode lasts, every decision comes
 //!   from the episode's [`FrontierEpisode`] instead of the plan; the low level acts without
 //!   noise in navigation segments and with its usual noise otherwise.
 
 use envs::api::{Env, Reset, Step};
+use protocol::config::FrPotentialReports;
 use protocol::graph::ReachSample;
 use protocol::{DecisionKind, EpisodeId, LatentPoint, PhiVersion, TrajectoryFlags};
+use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 
 use crate::error::ActorError;
@@ -154,7 +158,8 @@ pub(crate) struct Episode {
     /// ‖subgoal − φ(s_t)‖ at the segment's decision; `None` after a φ change mid-segment.
     segment_start_distance: Option<f32>,
     /// Un-pushed candidate of the explore segment in progress; `None` when the segment
-    /// reports no reaching sample (not graph-chosen, or FR with `asi.fr_feeds_potential` off).
+    /// reports no reaching sample (not graph-chosen, or FR not chosen to report by
+    /// `asi.fr_potential_reports`).
     candidate: Option<LatentPoint>,
     obs: Vec<f32>,
     phi: Vec<f32>,
@@ -370,7 +375,19 @@ impl Episode {
         };
         self.segment_source = Some(source);
         self.segment_start_distance = Some(self.subgoal_distance());
-        self.candidate = params.feeds_potential.then_some(decided.subgoal);
+        // Whether this segment reports its reaching error to the potential map. The count
+        // draw is the decision's last random number, after the FR logic's own draws; it is
+        // drawn only while HESS exploration is open, as the released code's `valid_count`
+        // matters only then (digest §2.3 A.1, §7 item 4).
+        let reports = match params.potential_reports {
+            FrPotentialReports::Every => true,
+            FrPotentialReports::Off => false,
+            FrPotentialReports::CountDraw => self
+                .plan
+                .explore
+                .is_some_and(|gate| rollout.rng.random::<f64>() < f64::from(gate.count_prob)),
+        };
+        self.candidate = reports.then_some(decided.subgoal);
         rollout.decisions.n_decisions += 1;
         let stats = &mut rollout.frontier_stats;
         match decided.choice {

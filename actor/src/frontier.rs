@@ -21,6 +21,9 @@
 //!      the least visited by the graph's n(v) (Eq. 10) chosen by the oracle; with no answer the
 //!      first candidate is taken (counted). The low level keeps its exploration noise;
 //!   4. prev2 ← prev, prev ← ag.
+//! - **Potential reports**: whether the segment reports its reaching error to HESS's potential
+//!   map at the next decision is the actor's business (`asi.fr_potential_reports`, see
+//!   `Episode::decide_frontier`).
 //! - The stored high action is `subgoal − φ(s_t)`, not clipped (as HESS explore decisions).
 //!
 //! Invariants: random numbers come only from the caller's generator, in a fixed order (k for a
@@ -28,7 +31,7 @@
 //! route and g_F are points of the φ-space the episode started in (the actor ends FR mode when
 //! a new φ arrives mid-episode, as those points would no longer mean anything).
 
-use protocol::config::NearFrontier;
+use protocol::config::{FrPotentialReports, NearFrontier};
 use protocol::graph::FrontierRoute;
 use protocol::{Config, DecisionKind, LatentPoint, PhiVersion};
 use rand::Rng;
@@ -56,9 +59,9 @@ pub struct FrontierParams {
     pub end_at_frontier: bool,
     /// The low level navigates without exploration noise (`asi.fr_noise_free_low`).
     pub noise_free_navigation: bool,
-    /// FR segments report their reaching error to the potential map
-    /// (`asi.fr_feeds_potential`).
-    pub feeds_potential: bool,
+    /// Which FR segments report their reaching error to the potential map
+    /// (`asi.fr_potential_reports`).
+    pub potential_reports: FrPotentialReports,
 }
 
 impl FrontierParams {
@@ -78,7 +81,7 @@ impl FrontierParams {
             abs_range: config.hierarchy.abs_range as f32,
             end_at_frontier: asi.near_frontier == NearFrontier::EndFr,
             noise_free_navigation: asi.fr_noise_free_low,
-            feeds_potential: asi.fr_feeds_potential,
+            potential_reports: asi.fr_potential_reports,
         }))
     }
 }

@@ -10,6 +10,7 @@ use actor::{
     Actor, ActorError, Chunk, ExploreAnswer, GraphOracle, GraphTransport, LeastVisitedAnswer,
     ServiceOracle,
 };
+use protocol::config::FrPotentialReports;
 use protocol::graph::{
     FrontierRoute, GraphRequestHeader, GraphResponseHeader, GraphStatus, NoRouteReason, ReachSample,
 };
@@ -132,7 +133,7 @@ fn params() -> FrontierParams {
         abs_range: 10.0,
         end_at_frontier: false,
         noise_free_navigation: true,
-        feeds_potential: true,
+        potential_reports: FrPotentialReports::CountDraw,
     }
 }
 
@@ -544,19 +545,8 @@ fn an_fr_episode_follows_the_route_with_waypoints_k_nodes_ahead_and_a_far_goal()
             "stored action = subgoal − φ(s_t), unclipped"
         );
     }
-    // Every FR segment but the last reports ‖subgoal − φ(s_{t+c})‖ at its subgoal (digest §5.3).
-    let expected: Vec<ReachSample> = decided
-        .windows(2)
-        .map(|w| ReachSample {
-            subgoal: [w[0].subgoal[0], w[0].subgoal[1]],
-            error: dist(&w[0].subgoal, &w[1].phi),
-        })
-        .collect();
-    assert_eq!(oracle.reported.len(), 9);
-    for (got, want) in oracle.reported.iter().zip(&expected) {
-        assert_eq!(got.subgoal, want.subgoal);
-        assert!((got.error - want.error).abs() < 1e-5, "{got:?} vs {want:?}");
-    }
+    // What the segments report to the potential: `with_every_all_fr_segments_but_the_last_*`
+    // and `with_count_draw_*` below.
     ks.sort_unstable();
     ks.dedup();
     assert!(ks.len() > 1, "k is drawn per decision: {ks:?}");
@@ -913,34 +903,117 @@ fn with_fr_noise_free_low_off_navigation_keeps_the_exploration_noise() {
     );
 }
 
-#[test]
-fn fr_segments_feed_the_potential_unless_switched_off() {
+/// `episodes` FR episodes (every decision navigates) of one actor under `reports`, with the
+/// schedule's `count_prob` and HESS exploration open or not: each episode's decisions and
+/// the reaching samples reported during it.
+fn fr_reports(
+    reports: FrPotentialReports,
+    count_prob: f32,
+    explore_open: bool,
+    episodes: usize,
+) -> Vec<(Vec<StepRecord>, Vec<ReachSample>)> {
     let mut config = config();
     config.asi.stuck_threshold = 0.0; // every decision navigates
-    let run = |config: &Config| {
-        let mut actor = actor(config, 7, 1.0);
-        let mut oracle = ScriptedOracle::new(straight_route);
-        let decided = decisions(&episode(&mut actor, &mut oracle));
-        (decided, oracle.reported)
+    config.asi.fr_potential_reports = reports;
+    let schedule = RunSchedule {
+        train_episodes: if explore_open {
+            config.exploration.explore_start_episode + 1
+        } else {
+            0
+        },
+        count_prob,
+        fr_prob: 1.0,
     };
-    let (decided, reported) = run(&config);
-    assert_eq!(kinds(&decided), vec![DecisionKind::FrontierRoute; 10]);
-    // Every segment but the episode's last one: at the waypoint, the distance left at the
-    // next decision.
-    assert_eq!(reported.len(), 9);
-    for (sample, pair) in reported.iter().zip(decided.windows(2)) {
-        assert_eq!(sample.subgoal, [pair[0].subgoal[0], pair[0].subgoal[1]]);
-        let error = dist(&pair[0].subgoal, &pair[1].phi);
-        assert!(
-            (sample.error - error).abs() < 1e-5,
-            "{} vs {error}",
-            sample.error
-        );
+    let mut actor = Actor::new(&config, ActorId(0), 7).unwrap();
+    reload(&mut actor, schedule, 1);
+    (0..episodes)
+        .map(|_| {
+            let mut oracle = ScriptedOracle::new(straight_route);
+            let decided = decisions(&episode(&mut actor, &mut oracle));
+            assert_eq!(kinds(&decided), vec![DecisionKind::FrontierRoute; 10]);
+            (decided, oracle.reported)
+        })
+        .collect()
+}
+
+/// Asserts that the samples are, in order, the reaching errors of distinct segments of
+/// `decided` other than the last (‖subgoal − φ(s_{t+c})‖ at the segment's waypoint, digest
+/// §5.3): returns the indices of the reporting segments.
+fn reporting_segments(decided: &[StepRecord], reported: &[ReachSample]) -> Vec<usize> {
+    // Samples come in segment order; a waypoint can repeat, so each sample is matched to the
+    // first later segment with its subgoal and error.
+    let mut next = 0;
+    reported
+        .iter()
+        .map(|sample| {
+            let i = (next..decided.len().saturating_sub(1))
+                .find(|&i| {
+                    sample.subgoal == [decided[i].subgoal[0], decided[i].subgoal[1]]
+                        && (sample.error - dist(&decided[i].subgoal, &decided[i + 1].phi)).abs()
+                            < 1e-5
+                })
+                .unwrap_or_else(|| panic!("{sample:?} is no later segment's reaching error"));
+            next = i + 1;
+            i
+        })
+        .collect()
+}
+
+fn subgoals(decided: &[StepRecord]) -> Vec<Vec<f32>> {
+    decided.iter().map(|r| r.subgoal.clone()).collect()
+}
+
+#[test]
+fn with_every_all_fr_segments_but_the_last_feed_the_potential() {
+    let [(decided, reported)] = fr_reports(FrPotentialReports::Every, 0.0, false, 1)
+        .try_into()
+        .unwrap();
+    assert_eq!(reporting_segments(&decided, &reported), (0..9).collect::<Vec<_>>());
+}
+
+#[test]
+fn with_off_no_fr_segment_reports_and_the_subgoals_stay_the_same() {
+    let [(every, _)] = fr_reports(FrPotentialReports::Every, 0.5, true, 1)
+        .try_into()
+        .unwrap();
+    let [(off, reported)] = fr_reports(FrPotentialReports::Off, 0.5, true, 1)
+        .try_into()
+        .unwrap();
+    assert!(reported.is_empty());
+    assert_eq!(subgoals(&off), subgoals(&every));
+}
+
+#[test]
+fn with_count_draw_fr_segments_report_with_probability_count_prob() {
+    // count_prob 1 (and exploration open): every segment reports, as with "every".
+    for (decided, reported) in fr_reports(FrPotentialReports::CountDraw, 1.0, true, 3) {
+        assert_eq!(reporting_segments(&decided, &reported), (0..9).collect::<Vec<_>>());
     }
-    config.asi.fr_feeds_potential = false;
-    let (same, none) = run(&config);
-    assert!(none.is_empty());
-    // The switch changes nothing else: the same subgoals, decision for decision.
-    let subgoals = |d: &[StepRecord]| d.iter().map(|r| r.subgoal.clone()).collect::<Vec<_>>();
-    assert_eq!(subgoals(&same), subgoals(&decided));
+    // count_prob 0: none does.
+    for (_, reported) in fr_reports(FrPotentialReports::CountDraw, 0.0, true, 3) {
+        assert!(reported.is_empty());
+    }
+    // Exploration not open yet: no draw and no report, the subgoals of "every" (same seed).
+    let [(closed, reported)] = fr_reports(FrPotentialReports::CountDraw, 1.0, false, 1)
+        .try_into()
+        .unwrap();
+    assert!(reported.is_empty());
+    let [(every, _)] = fr_reports(FrPotentialReports::Every, 1.0, false, 1)
+        .try_into()
+        .unwrap();
+    assert_eq!(subgoals(&closed), subgoals(&every));
+    // count_prob 0.3 over 40 episodes (360 reportable segments): about 30 % report (the
+    // binomial standard deviation is 2.4 points), and each is a segment's own error.
+    let mut n_reported = 0;
+    let mut segments_hit = [0u32; 9];
+    for (decided, reported) in fr_reports(FrPotentialReports::CountDraw, 0.3, true, 40) {
+        for i in reporting_segments(&decided, &reported) {
+            segments_hit[i] += 1;
+            n_reported += 1;
+        }
+    }
+    let fraction = f64::from(n_reported) / 360.0;
+    assert!((0.2..0.4).contains(&fraction), "{fraction}");
+    // Not tied to a position in the episode.
+    assert!(segments_hit.iter().all(|&n| n > 0), "{segments_hit:?}");
 }

@@ -364,13 +364,15 @@ pub struct AsiConfig {
     /// Default true. Source: code. false is an experiment (not in the paper): navigation
     /// segments keep the low level's exploration noise, as count mode does.
     pub fr_noise_free_low: bool,
-    /// FR segments (navigation and count mode) report their reaching error to HESS's
-    /// potential map, as HESS's explore segments do. Default true. Source: code (digest §5.3;
-    /// the code reports an FR segment only when its decision's count draw came up, here every
-    /// one reports). false is an experiment (not in the paper): only HESS
+    /// Which FR segments (navigation and count mode) report their reaching error to HESS's
+    /// potential map, as HESS's explore segments do: `"count_draw"` (default; source: code,
+    /// digest §2.3 A.1 and §7: a segment reports when its decision's count draw, probability
+    /// `count_prob`, came up, and only while HESS exploration is open), `"every"` (every FR
+    /// segment; this project's behaviour before `count_draw` existed, which every earlier ASI
+    /// run in docs/RESULTS.md used) or `"off"` (an experiment, not in the paper: only HESS
     /// explore segments feed the potential, so failed FR walks toward the frontier do not
-    /// steer the ordinary episodes' explore subgoals away from it.
-    pub fr_feeds_potential: bool,
+    /// steer the ordinary episodes' explore subgoals away from it).
+    pub fr_potential_reports: FrPotentialReports,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
     /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code.
@@ -411,6 +413,21 @@ pub enum NearFrontier {
     EndFr,
 }
 
+/// Which FR segments report their reaching error to the potential map
+/// (`asi.fr_potential_reports`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrPotentialReports {
+    /// Those whose decision's count draw came up, probability `count_prob` (released code).
+    /// Default.
+    #[default]
+    CountDraw,
+    /// Every FR segment but an episode's last.
+    Every,
+    /// None.
+    Off,
+}
+
 impl Default for AsiConfig {
     fn default() -> Self {
         Self {
@@ -439,7 +456,7 @@ impl Default for AsiConfig {
             count_mode_score: CountModeScore::GraphVisits,
             near_frontier: NearFrontier::CountMode,
             fr_noise_free_low: true,
-            fr_feeds_potential: true,
+            fr_potential_reports: FrPotentialReports::CountDraw,
             si_start_episode: 300,
             si_alpha: 0.01,
             si_beta: 0.001,

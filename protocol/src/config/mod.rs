@@ -30,7 +30,7 @@ pub use learner::{
 };
 pub use method::{
     AsiConfig, CountModeScore, EncoderConfig, ExplorationConfig, FrProbStep, FutureCountAveraging,
-    GraphConfig, NearFrontier, NodePosition, StableWeighting,
+    FrPotentialReports, GraphConfig, NearFrontier, NodePosition, StableWeighting,
 };
 
 /// File name of the resolved configuration inside the run directory.
