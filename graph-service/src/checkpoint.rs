@@ -505,6 +505,10 @@ fn save_maps(service: &GraphService) -> Result<Vec<u8>, String> {
             "n_reach_samples".to_owned(),
             hess.n_reach_samples.to_string(),
         ),
+        (
+            "episodes_stored".to_owned(),
+            hess.episodes_stored.to_string(),
+        ),
     ]);
     let tensors = arrays.iter().map(|(name, a)| (name.clone(), a)).collect();
     ckpt::serialize(tensors, metadata)
@@ -521,6 +525,12 @@ fn restore_maps(service: &mut GraphService, bytes: &[u8]) -> Result<(), String> 
         episodes_since_future: meta(&metadata, "episodes_since_future")?,
         n_future_recomputes: meta(&metadata, "n_future_recomputes")?,
         n_reach_samples: meta(&metadata, "n_reach_samples")?,
+        // Checkpoints written before the counter existed: the store's closed trajectories
+        // (the same number unless the store evicted).
+        episodes_stored: match metadata.get("episodes_stored") {
+            Some(_) => meta(&metadata, "episodes_stored")?,
+            None => service.store.trajectories().filter(|t| t.is_closed()).count() as u64,
+        },
     };
     service.hess = HessMaps::from_parts(service.hess.params().clone(), parts)?;
     let saved: Vec<(CellKey, u64)> = read_cells(&st, "counts")?;

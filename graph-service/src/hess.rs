@@ -11,8 +11,11 @@
 //!   released code, these counts are **never reset** — not when φ changes (old counts stay in
 //!   the cells the old φ put them in; HESS's stability loss keeps φ from moving far) and not
 //!   when the store evicts (they measure experience, not the store). States whose key is out of
-//!   range are not counted. Unlike the code, counting starts with the first stored state rather
-//!   than after `explore_start_episode`; the actors do not ask for explore subgoals before then.
+//!   range are not counted. As in the code, counting starts only once more than
+//!   `explore_start_episode` closed episodes are stored ([`HessMaps::count_arrival`]; the
+//!   code's `epoch > start_explore`), so the φ of the first episodes, untrained, puts no counts
+//!   in cells it will not mean later; with `exploration.visits_from_start` every stored state
+//!   counts (this project's behaviour before that existed).
 //! - **future counts** F(cell), recomputed after every `future_count_interval_episodes` stored
 //!   (closed) episodes and after every φ re-map (in the code the φ round falls on a recompute
 //!   episode too). For every closed stored trajectory, the states at env steps c, 2c, … (c =
@@ -66,6 +69,9 @@ pub struct HessParams {
     pub averaging: FutureCountAveraging,
     /// c: env steps between the states that enter the future counts (`hierarchy.c`).
     pub subgoal_interval: u32,
+    /// Arriving states count as visits once more than this many closed episodes are stored
+    /// (`explore_start_episode`); `None`: from the first (`visits_from_start`).
+    pub count_after_episodes: Option<u64>,
 }
 
 impl HessParams {
@@ -83,6 +89,7 @@ impl HessParams {
             discount: e.future_count_discount,
             averaging: e.future_count_averaging,
             subgoal_interval: config.hierarchy.c,
+            count_after_episodes: (!e.visits_from_start).then_some(e.explore_start_episode),
         }
     }
 }
@@ -124,6 +131,8 @@ pub struct HessParts {
     pub n_future_recomputes: u64,
     /// Reach samples accepted so far.
     pub n_reach_samples: u64,
+    /// Closed episodes stored so far.
+    pub episodes_stored: u64,
 }
 
 /// Visit counts, future counts and potential on the count grid (see the module doc).
@@ -137,6 +146,7 @@ pub struct HessMaps {
     episodes_since_future: u64,
     n_future_recomputes: u64,
     n_reach_samples: u64,
+    episodes_stored: u64,
 }
 
 impl HessMaps {
@@ -153,6 +163,7 @@ impl HessMaps {
             episodes_since_future: 0,
             n_future_recomputes: 0,
             n_reach_samples: 0,
+            episodes_stored: 0,
         }
     }
 
@@ -170,6 +181,7 @@ impl HessMaps {
             episodes_since_future: self.episodes_since_future,
             n_future_recomputes: self.n_future_recomputes,
             n_reach_samples: self.n_reach_samples,
+            episodes_stored: self.episodes_stored,
         }
     }
 
@@ -200,6 +212,7 @@ impl HessMaps {
         maps.episodes_since_future = parts.episodes_since_future;
         maps.n_future_recomputes = parts.n_future_recomputes;
         maps.n_reach_samples = parts.n_reach_samples;
+        maps.episodes_stored = parts.episodes_stored;
         Ok(maps)
     }
 
@@ -215,6 +228,25 @@ impl HessMaps {
         }
     }
 
+    /// Counts arriving states `points` as visits when counting has started (more than
+    /// `count_after_episodes` closed episodes stored, or always when that is `None`); returns
+    /// whether it counted them.
+    pub fn count_arrival(&mut self, points: &[LatentPoint]) -> bool {
+        let counting = self
+            .params
+            .count_after_episodes
+            .is_none_or(|after| self.episodes_stored > after);
+        if counting {
+            self.count(points);
+        }
+        counting
+    }
+
+    /// Closed episodes stored so far ([`HessMaps::episode_stored`] calls).
+    pub fn episodes_stored(&self) -> u64 {
+        self.episodes_stored
+    }
+
     /// n of the cell holding `point` (0 when unvisited or out of range).
     pub fn visits_at(&self, point: LatentPoint) -> u64 {
         self.grid
@@ -226,6 +258,7 @@ impl HessMaps {
     /// Notes one more closed episode in `store`; recomputes the future counts when
     /// `future_interval_episodes` have accumulated. Returns whether it recomputed.
     pub fn episode_stored(&mut self, store: &TrajectoryStore) -> bool {
+        self.episodes_stored += 1;
         self.episodes_since_future += 1;
         if self.episodes_since_future < self.params.future_interval_episodes {
             return false;
@@ -440,6 +473,7 @@ mod tests {
             discount,
             averaging,
             subgoal_interval: c,
+            count_after_episodes: None,
         }
     }
 

@@ -172,7 +172,7 @@ impl GraphService {
                 let n_records = u64::from(header.n_steps);
                 let episode_end = chunk.episode_end;
                 self.counts.add(&chunk.latents);
-                self.hess.count(&chunk.latents);
+                self.hess.count_arrival(&chunk.latents);
                 let evicted = self.store.append(chunk);
                 self.counts.remove(&evicted);
                 if episode_end {

@@ -315,3 +315,37 @@ fn a_damaged_newest_checkpoint_falls_back_to_the_previous_one() {
     assert!(empty.restored.is_none() && empty.refused.is_empty());
     remove(&dir);
 }
+
+#[test]
+fn a_checkpoint_from_before_the_episode_counter_restores_it_from_the_store() {
+    let (dir, path) = saved("no-episode-counter");
+    let original = busy_service();
+    // Closed: the four arms, the late trajectory (its chunk ends the episode) and the episode
+    // of actor 2; the open one is not.
+    assert_eq!(original.hess().episodes_stored(), 6);
+    // Rewrite maps.safetensors as an older writer did: without `episodes_stored`.
+    let file = path.join("maps.safetensors");
+    let bytes = fs::read(&file).unwrap();
+    let (st, mut metadata) = ckpt::parse(&bytes).unwrap();
+    assert!(metadata.remove("episodes_stored").is_some());
+    let tensors: Vec<_> = st
+        .tensors()
+        .into_iter()
+        .map(|(name, view)| (name, view))
+        .collect();
+    let older = ckpt::serialize(tensors, metadata).unwrap();
+    fs::write(&file, &older).unwrap();
+    edit_manifest(&path, |m| {
+        let entry = m
+            .files
+            .iter_mut()
+            .find(|f| f.name == "maps.safetensors")
+            .unwrap();
+        *entry = ckpt::FileEntry::of("maps.safetensors", &older);
+    });
+    let (restored, _) = GraphService::restore(&path, &config(), dims()).unwrap();
+    // The store's closed trajectories: the same number, since nothing was evicted.
+    assert_eq!(restored.hess().episodes_stored(), 6);
+    assert_eq!(restored.hess(), original.hess());
+    remove(&dir);
+}

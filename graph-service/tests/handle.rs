@@ -393,6 +393,7 @@ fn least_visited_scores_by_hess_future_count_when_configured() {
     let mut config = config();
     config.asi.count_mode_score = protocol::config::CountModeScore::FutureCount;
     config.hierarchy.c = 1; // every stored state is a decision state of the future counts
+    config.exploration.visits_from_start = true; // a handful of episodes, all counted
     let mut service = plus_service_with(&config);
     assert!(service.hess().n_future_recomputes() > 0);
     // Brute force: the first candidate with the lowest F of its 3.0-cell.

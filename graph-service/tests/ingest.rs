@@ -3,7 +3,8 @@
 mod common;
 
 use common::*;
-use graph_service::GraphServiceError;
+use graph_service::{GraphService, GraphServiceError};
+use protocol::Config;
 use protocol::{ActorId, EpisodeId, ProtocolError};
 
 #[test]
@@ -176,4 +177,36 @@ fn the_store_evicts_oldest_episodes_and_counts_follow() {
         service.stored_episodes(),
         vec![(ActorId(0), EpisodeId(1)), (ActorId(1), EpisodeId(0))]
     );
+}
+
+/// HESS visit counts (digest §2.3 D) of a service whose config stores `episodes` one-state-
+/// per-cell episodes: the i-th visits cells (i, 0) and (i, 1) (unit φ = xy; HESS cells of 3.0
+/// hold x in [0, 3), [3, 6), …).
+fn hess_visits_after(config: &Config, episodes: u64) -> (GraphService, Vec<u64>) {
+    let mut service = service(config);
+    for e in 0..episodes {
+        let x = 3 * e as i32;
+        ingest_episode(&mut service, 0, e, &[at(x, 0), at(x, 1)]);
+    }
+    let visits = (0..episodes)
+        .map(|e| service.hess().visits_at(at(3 * e as i32, 0)))
+        .collect();
+    (service, visits)
+}
+
+#[test]
+fn hess_visits_count_only_after_explore_start_episodes_are_stored_unless_from_start() {
+    let mut config = config();
+    config.exploration.explore_start_episode = 2;
+    // Episodes 0, 1, 2 arrive with 0, 1, 2 closed episodes stored: not counted (the code's
+    // `epoch > start_explore`); 3 and 4 are, both of their states in one 3.0-cell.
+    let (service, visits) = hess_visits_after(&config, 5);
+    assert_eq!(visits, vec![0, 0, 0, 2, 2]);
+    assert_eq!(service.hess().episodes_stored(), 5);
+    assert_eq!(service.stats().hess_visited_cells, 2);
+    // The graph's own visit counts n(v) are not gated: every stored state counts.
+    assert_eq!(service.stats().stored_steps, 10);
+    config.exploration.visits_from_start = true;
+    let (_, visits) = hess_visits_after(&config, 5);
+    assert_eq!(visits, vec![2; 5]);
 }

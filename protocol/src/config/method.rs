@@ -157,6 +157,13 @@ pub struct ExplorationConfig {
     /// Count-based subgoals are allowed after this episode. Default 100. Unit: episodes.
     /// Source: code (`start_explore`).
     pub explore_start_episode: u64,
+    /// Which stored states count as HESS visits n(cell). Default false: only those that
+    /// arrive once more than `explore_start_episode` episodes are stored, closed (source:
+    /// code, digest §2.3 D: `hash` is incremented only when `epoch > start_explore`, so the
+    /// untrained φ of the first episodes leaves no counts). true: every stored state from the
+    /// run's first episode on (this project's behaviour before 3 December 2026, which every
+    /// run in docs/RESULTS.md used).
+    pub visits_from_start: bool,
     /// Future counts are recomputed every this many episodes. Default 10. Unit: episodes.
     /// Source: code.
     pub future_count_interval_episodes: u64,
@@ -186,6 +193,7 @@ impl Default for ExplorationConfig {
             potential_coeff: 10.0,
             potential_start_episode: 400,
             explore_start_episode: 100,
+            visits_from_start: false,
             future_count_interval_episodes: 10,
             future_count_discount: 0.99,
             count_prob_interval_episodes: 50,
