@@ -328,12 +328,7 @@ fn a_checkpoint_from_before_the_episode_counter_restores_it_from_the_store() {
     let bytes = fs::read(&file).unwrap();
     let (st, mut metadata) = ckpt::parse(&bytes).unwrap();
     assert!(metadata.remove("episodes_stored").is_some());
-    let tensors: Vec<_> = st
-        .tensors()
-        .into_iter()
-        .map(|(name, view)| (name, view))
-        .collect();
-    let older = ckpt::serialize(tensors, metadata).unwrap();
+    let older = ckpt::serialize(st.tensors(), metadata).unwrap();
     fs::write(&file, &older).unwrap();
     edit_manifest(&path, |m| {
         let entry = m
