@@ -968,7 +968,10 @@ fn with_every_all_fr_segments_but_the_last_feed_the_potential() {
     let [(decided, reported)] = fr_reports(FrPotentialReports::Every, 0.0, false, 1)
         .try_into()
         .unwrap();
-    assert_eq!(reporting_segments(&decided, &reported), (0..9).collect::<Vec<_>>());
+    assert_eq!(
+        reporting_segments(&decided, &reported),
+        (0..9).collect::<Vec<_>>()
+    );
 }
 
 #[test]
@@ -987,7 +990,10 @@ fn with_off_no_fr_segment_reports_and_the_subgoals_stay_the_same() {
 fn with_count_draw_fr_segments_report_with_probability_count_prob() {
     // count_prob 1 (and exploration open): every segment reports, as with "every".
     for (decided, reported) in fr_reports(FrPotentialReports::CountDraw, 1.0, true, 3) {
-        assert_eq!(reporting_segments(&decided, &reported), (0..9).collect::<Vec<_>>());
+        assert_eq!(
+            reporting_segments(&decided, &reported),
+            (0..9).collect::<Vec<_>>()
+        );
     }
     // count_prob 0: none does.
     for (_, reported) in fr_reports(FrPotentialReports::CountDraw, 0.0, true, 3) {

@@ -529,7 +529,11 @@ fn restore_maps(service: &mut GraphService, bytes: &[u8]) -> Result<(), String> 
         // (the same number unless the store evicted).
         episodes_stored: match metadata.get("episodes_stored") {
             Some(_) => meta(&metadata, "episodes_stored")?,
-            None => service.store.trajectories().filter(|t| t.is_closed()).count() as u64,
+            None => service
+                .store
+                .trajectories()
+                .filter(|t| t.is_closed())
+                .count() as u64,
         },
     };
     service.hess = HessMaps::from_parts(service.hess.params().clone(), parts)?;

@@ -29,8 +29,8 @@ pub use learner::{
     DeterministicLowConfig, HighLearnerConfig, LearnerConfig, LowAlgo, LowLearnerConfig,
 };
 pub use method::{
-    AsiConfig, CountModeScore, EncoderConfig, ExplorationConfig, FrProbStep, FutureCountAveraging,
-    FrPotentialReports, GraphConfig, NearFrontier, NodePosition, StableWeighting,
+    AsiConfig, CountModeScore, EncoderConfig, ExplorationConfig, FrPotentialReports, FrProbStep,
+    FutureCountAveraging, GraphConfig, NearFrontier, NodePosition, StableWeighting,
 };
 
 /// File name of the resolved configuration inside the run directory.
