@@ -830,16 +830,14 @@ fn write_line(
         }
     }
     // Not `graph/version`: a restored graph-service counts its rebuild as one more version.
-    let g = graph.stats();
-    for (name, value) in [
-        ("stored_steps", g.stored_steps),
-        ("nodes", g.n_nodes as u64),
-        ("edges", g.n_edges as u64),
-    ] {
-        object.insert(
-            format!("graph-service/graph/{name}"),
-            serde_json::json!(value),
-        );
+    // All are counts, exact in f64; serial lines have always written them as integers.
+    for (name, value) in crate::proc::graph_service::graph_metrics(&graph.stats()) {
+        if name != "graph/version" {
+            object.insert(
+                format!("graph-service/{name}"),
+                serde_json::json!(value as u64),
+            );
+        }
     }
     for (name, value) in eval {
         object.insert(format!("evaluator0/{name}"), serde_json::json!(value));

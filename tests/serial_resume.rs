@@ -660,6 +660,16 @@ fn ablation_arms_forked_from_a_shared_serial_prefix_equal_runs_started_with_thei
     assert!(metric_sum(last, "/actor/fr/episodes") > 0.0, "{last}");
     assert_eq!(metric_sum(at(si_start), "learner/si/steps"), 0.0);
     assert!(metric_sum(last, "learner/si/steps") > 0.0, "{last}");
+    // The graph-service's counters are in every line, so the comparisons above held them too.
+    for key in [
+        "graph-service/graph/requests",
+        "graph-service/graph/explore_answers",
+        "graph-service/graph/hess_visited_cells",
+        "graph-service/graph/future_count_recomputes",
+        "graph-service/graph/reach_samples",
+    ] {
+        assert!(metric_sum(last, key) > 0.0, "{key}: {last}");
+    }
     // The flags matter: the prefixes continued with FR (SI) off part from the reference on
     // the first metrics line after FR's (SI's) start.
     launch(

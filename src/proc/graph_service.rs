@@ -352,7 +352,9 @@ fn load_new_weights(service: &mut GraphService, weights: &WeightsSubscriber) {
     }
 }
 
-fn graph_metrics(stats: &graph_service::GraphStats) -> Vec<(String, f64)> {
+/// The graph-service's counters as metrics (names documented in `docs/METRICS.md`); serial
+/// mode writes the same names but `graph/version`.
+pub fn graph_metrics(stats: &graph_service::GraphStats) -> Vec<(String, f64)> {
     vec![
         ("graph/stored_steps".to_owned(), stats.stored_steps as f64),
         ("graph/chunks".to_owned(), stats.chunks as f64),
@@ -395,6 +397,19 @@ fn graph_metrics(stats: &graph_service::GraphStats) -> Vec<(String, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_graph_metric_is_documented() {
+        let doc = std::fs::read_to_string("docs/METRICS.md").unwrap();
+        let start = doc.find("## Graph-service").unwrap();
+        let section = &doc[start..start + doc[start..].find("\n## Launcher").unwrap()];
+        for (name, _) in graph_metrics(&graph_service::GraphStats::default()) {
+            assert!(
+                section.contains(&format!("`{name}`")),
+                "{name} is not in the graph-service table of docs/METRICS.md"
+            );
+        }
+    }
 
     fn sequences(dir: &Path) -> Vec<u64> {
         let listed = ckpt::list(dir, "ckpt-").unwrap();
