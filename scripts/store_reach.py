@@ -38,6 +38,7 @@ Standard library only. docs/RESULTS.md ("Why ASI's ordinary episodes explore les
 with it.
 """
 import array
+import functools
 import json
 import math
 import os
@@ -112,10 +113,17 @@ def free_cell(x, y):
     return ix, iy
 
 
+@functools.lru_cache(maxsize=1)
+def read_store(checkpoint):
+    """The trajectory store of a graph-service checkpoint (observations, latents, episode ids,
+    lengths), read once: episode_figures and potential_by_s both need its largest tensor."""
+    return read_tensors(os.path.join(checkpoint, "store.safetensors"), ["obs", "latents", "episode", "len"])
+
+
 def episode_figures(checkpoint, fr=frozenset()):
     """(episode number, reach, cells, new, new w/o FR) per stored trajectory, in episode order;
     `fr`: the FR episodes' numbers."""
-    store = read_tensors(os.path.join(checkpoint, "store.safetensors"), ["obs", "episode", "len"])
+    store = read_store(checkpoint)
     obs, (_, obs_dim) = store["obs"]
     episodes, _ = store["episode"]
     lengths, _ = store["len"]
@@ -141,7 +149,7 @@ def episode_figures(checkpoint, fr=frozenset()):
 def potential_by_s(checkpoint):
     """({2 m bin start: summed potential}, unplaced potential, total potential)."""
     maps = read_tensors(os.path.join(checkpoint, "maps.safetensors"), ["potential.keys", "potential.values"])
-    store = read_tensors(os.path.join(checkpoint, "store.safetensors"), ["obs", "latents"])
+    store = read_store(checkpoint)
     obs, (n_states, obs_dim) = store["obs"]
     latents, (_, latent_dim) = store["latents"]
     where = {}

@@ -167,6 +167,7 @@ class StoreReach(unittest.TestCase):
                     "learner/charts/coverage_free_cells_visited": cells,
                 }) + "\n")
         self.checkpoint = checkpoint
+        store_reach.read_store.cache_clear()  # a temporary folder's name can come back
 
     def tearDown(self):
         import shutil
@@ -194,6 +195,26 @@ class StoreReach(unittest.TestCase):
         bins, unplaced, total = store_reach.potential_by_s(self.checkpoint)
         self.assertEqual(bins, {0: 2.0, 12: 5.0})
         self.assertEqual((unplaced, total), (7.0, 14.0))
+
+    def test_store_read_once(self):
+        # Both figures of one checkpoint come from one read of store.safetensors (an Ant
+        # store's observations are hundreds of megabytes); the maps file is read apart.
+        reads = []
+        original = store_reach.read_tensors
+
+        def counting(path, names):
+            reads.append(os.path.basename(path))
+            return original(path, names)
+
+        store_reach.read_store.cache_clear()
+        store_reach.read_tensors = counting
+        try:
+            store_reach.episode_figures(self.checkpoint)
+            store_reach.potential_by_s(self.checkpoint)
+        finally:
+            store_reach.read_tensors = original
+        self.assertEqual(reads.count("store.safetensors"), 1)
+        self.assertEqual(reads.count("maps.safetensors"), 1)
 
 
 if __name__ == "__main__":
