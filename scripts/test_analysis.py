@@ -206,7 +206,6 @@ class StoreReach(unittest.TestCase):
             reads.append(os.path.basename(path))
             return original(path, names)
 
-        store_reach.read_store.cache_clear()
         store_reach.read_tensors = counting
         try:
             store_reach.episode_figures(self.checkpoint)
