@@ -1,14 +1,15 @@
 #!/usr/bin/env python3
-"""How far the frontier-reaching (FR) episodes of AntMaze-U runs got, by stretch of training.
+"""How far the frontier-reaching (FR) episodes of maze runs got, by stretch of training.
 
     scripts/fr_outcomes.py [--stretches A-B,C-D,...] [--gain] RUN_DIR...
 
 Reads each run's metrics.jsonl (standard library only) and takes one record per finished FR
 episode of actor 0 from the `actor0/actor/fr/last_*` values (docs/METRICS.md): how its
 navigation ended (near the frontier, stuck, new phi, or still navigating when the episode
-ended) and where (`last_x`, `last_y`). Positions are measured along the U's corridor
-centreline from the start, s: (0, 0) -> (8, 0) -> (8, 8) -> (0, 8), 24 m; the test goal is at
-s = 24. Runs of builds before these metrics existed print no FR episodes.
+ended) and where (`last_x`, `last_y`). Positions are measured along the maze from the start,
+s in metres (scripts/maze_path.py, on the maze of the run's task: in AntMaze-U the centreline
+(0, 0) -> (8, 0) -> (8, 8) -> (0, 8), the test goal at s = 24). Runs of builds before these
+metrics existed print no FR episodes.
 
 Prints, per run and stretch of training episodes: the FR episodes, the share of each outcome,
 the median s where they ended (all of them, and those still navigating at the episode's end)
@@ -28,19 +29,12 @@ import json
 import statistics
 import sys
 
+import maze_path
+
 PREFIX = "actor0/actor/fr/"
 OUTCOMES = {0: "near frontier", 1: "stuck", 2: "new phi", 3: "still navigating"}
 COVERAGE = "learner/charts/coverage"
 STRETCHES = [(201, 500), (501, 1000), (1001, 1500), (1501, 2000)]
-
-
-def along_u(x, y):
-    """Distance along the U's centreline from the start to the point nearest (x, y), metres."""
-    if y < 2.0:
-        return max(min(x, 8.0), 0.0)
-    if y <= 6.0:
-        return 8.0 + y
-    return 16.0 + (8.0 - max(min(x, 8.0), 0.0))
 
 
 def records(path):
@@ -53,8 +47,9 @@ def records(path):
                 continue
 
 
-def fr_episodes(path):
-    """(training episode, outcome, s) of every FR episode recorded in metrics.jsonl."""
+def fr_episodes(path, maze):
+    """(training episode, outcome, s) of every FR episode recorded in metrics.jsonl; s along
+    `maze` (a maze_path.MazePath)."""
     seen = {}
     for record in records(path):
         if record.get(PREFIX + "last_outcome") is None:
@@ -64,12 +59,12 @@ def fr_episodes(path):
             seen[key] = (
                 int(record["learner/schedule/train_episodes"]),
                 int(record[PREFIX + "last_outcome"]),
-                along_u(record[PREFIX + "last_x"], record[PREFIX + "last_y"]),
+                maze.progress(record[PREFIX + "last_x"], record[PREFIX + "last_y"]),
             )
     return list(seen.values())
 
 
-def episode_ends(path):
+def episode_ends(path, maze):
     """(training episode, was FR, s) of every episode whose end position is recorded."""
     seen = {}
     for record in records(path):
@@ -81,7 +76,7 @@ def episode_ends(path):
             seen[key] = (
                 int(record["learner/schedule/train_episodes"]),
                 fr,
-                along_u(record["actor0/actor/last_episode_x"], record["actor0/actor/last_episode_y"]),
+                maze.progress(record["actor0/actor/last_episode_x"], record["actor0/actor/last_episode_y"]),
             )
     return list(seen.values())
 
@@ -152,7 +147,8 @@ def main(args):
     stretches, given, run_dirs = options(args, {"--gain"}, STRETCHES, __doc__)
     gain = "--gain" in given
     for run in run_dirs:
-        episodes = fr_episodes(f"{run}/metrics.jsonl")
+        maze = maze_path.for_run(run)
+        episodes = fr_episodes(f"{run}/metrics.jsonl", maze)
         print(f"== {run}: {len(episodes)} FR episodes with an outcome")
         for lo, hi in stretches:
             stretch = [e for e in episodes if lo <= e[0] <= hi]
@@ -168,7 +164,7 @@ def main(args):
                 f"  {lo}-{hi}: n={len(stretch)} | {shares} | s median {statistics.median(e[2] for e in stretch):.1f} m"
                 f" (still navigating: {nav_median} m), max {max(e[2] for e in stretch):.1f} m"
             )
-        ends = episode_ends(f"{run}/metrics.jsonl")
+        ends = episode_ends(f"{run}/metrics.jsonl", maze)
         if ends:
             print(f"  where episodes ended ({len(ends)} recorded), median s:")
         for lo, hi in stretches:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """When and where frontier-reaching (FR) walks end, from the actor's FR decision trace.
 
-    scripts/fr_trace.py [--by T] [--list] [--segments] LOG...
+    scripts/fr_trace.py [--task NAME] [--by T] [--list] [--segments] LOG...
 
 Each LOG is the output of an AntMaze run started with `RUST_LOG=info,actor=debug` (serial mode
 or an actor's log): every FR decision is a line "FR decision episode=E t=T xy=Some([x, y]) ...
@@ -13,8 +13,8 @@ would have got in a 500-step episode).
 Per LOG: FR episodes; how navigation ended (stuck, near the frontier, or no switch before the
 episode's end, which includes the rare FR mode ended by a new φ: the trace does not show that);
 the median env step of the stuck and near-frontier switches; the median distance s along the
-U's centreline (scripts/fr_outcomes.py's `along_u`) where navigation ended and the furthest s
-by step T. `--list` also prints each episode's end as (x, y) t<step><S|N|->.
+maze (scripts/maze_path.py; `--task`, default antmaze-u, names the run's task) where navigation
+ended and the furthest s by step T. `--list` also prints each episode's end as (x, y) t<step><S|N|->.
 
 `--segments` also prints how the low level fares on the way: every navigation segment (a
 waypoint decision followed by the next decision of the same episode, c env steps later),
@@ -28,7 +28,7 @@ import re
 import statistics
 import sys
 
-from fr_outcomes import along_u
+import maze_path
 
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 DECISION = re.compile(
@@ -145,7 +145,7 @@ def median_or_dash(values, fmt="{:.0f}"):
     return fmt.format(statistics.median(values)) if values else "-"
 
 
-def summarize(path, by, listing, with_segments):
+def summarize(path, maze, by, listing, with_segments):
     episodes = walks(path)
     if not episodes:
         print(f"{path}: no FR decisions (was it run with RUST_LOG=info,actor=debug?)")
@@ -154,9 +154,9 @@ def summarize(path, by, listing, with_segments):
     stuck = [t for t, _, _, switch in ends if switch == "Stuck"]
     near = [t for t, _, _, switch in ends if switch == "NearFrontier"]
     running = len(ends) - len(stuck) - len(near)
-    end_s = [along_u(x, y) for _, x, y, _ in ends]
+    end_s = [maze.progress(x, y) for _, x, y, _ in ends]
     furthest = [
-        max((along_u(x, y) for t, x, y, _ in decisions if t <= by), default=0.0)
+        max((maze.progress(x, y) for t, x, y, _ in decisions if t <= by), default=0.0)
         for decisions in episodes.values()
     ]
     n = len(ends)
@@ -175,11 +175,13 @@ def summarize(path, by, listing, with_segments):
 
 
 def main(argv):
-    by, listing, with_segments, paths = 500, False, False, []
+    by, listing, with_segments, paths, task = 500, False, False, [], "antmaze-u"
     args = iter(argv)
     for arg in args:
         if arg == "--by":
             by = int(next(args, "500"))
+        elif arg == "--task":
+            task = next(args, None) or sys.exit("--task needs a task name (asi tasks lists them)")
         elif arg == "--list":
             listing = True
         elif arg == "--segments":
@@ -190,8 +192,9 @@ def main(argv):
             paths.append(arg)
     if not paths:
         sys.exit(__doc__)
+    maze = maze_path.for_task(task)
     for path in paths:
-        summarize(path, by, listing, with_segments)
+        summarize(path, maze, by, listing, with_segments)
 
 
 if __name__ == "__main__":

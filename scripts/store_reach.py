@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""How far each episode of an AntMaze-U run went, read from the graph-service's trajectory store.
+"""How far each episode of a maze run went, read from the graph-service's trajectory store.
 
     scripts/store_reach.py [--stretches A-B,C-D,...] [--potential] RUN_DIR...
 
@@ -15,11 +15,11 @@ only runs whose store still holds every episode (nothing evicted).
 
 Per run and stretch of training episodes it prints, FR and ordinary episodes apart, the mean
 of three figures per episode:
-- `reach`: the furthest point along the U's centreline, s in metres (fr_outcomes.along_u;
-  start 0, test goal 24);
+- `reach`: the furthest point along the maze from the start, s in metres
+  (scripts/maze_path.py on the maze of the run's task; in AntMaze-U the test goal is at 24);
 - `cells`: distinct free 0.6 m coverage cells the episode entered, on the grid of
   `charts/coverage` (docs/METRICS.md: from the goal box's low corner, (-2, -2) in AntMaze-U; a
-  cell is free when its centre is outside the U's inner wall block [-2, 6] x [2, 6]);
+  cell is free when its centre is in a free maze cell);
 - `new`: of those, cells no earlier episode of the run had entered: the episode's coverage
   gain in cells. Summed over all episodes it is `charts/coverage_free_cells_visited` on the
   metrics line of the store's last episode, which the script checks (a mismatch means the store and the metric
@@ -46,11 +46,9 @@ import statistics
 import struct
 import sys
 
-from fr_outcomes import along_u, options, records
+import maze_path
+from fr_outcomes import options, records
 
-COVERAGE_CELL = 0.6
-GRID_LOW = (-2.0, -2.0)  # AntMaze-U's goal box, low corner
-WALL = ((-2.0, 6.0), (2.0, 6.0))  # the U's inner wall block, x and y ranges
 COUNT_CELL = 3.0
 STRETCHES = [(101, 250), (251, 500)]
 DTYPES = {"F32": "f", "F64": "d", "I32": "i", "U32": "I", "U64": "Q", "U8": "B"}
@@ -100,19 +98,6 @@ def fr_episode_numbers(metrics):
     return fr
 
 
-def free_cell(x, y):
-    """The coverage cell of (x, y) when its centre is free, else None."""
-    ix = math.floor((x - GRID_LOW[0]) / COVERAGE_CELL)
-    iy = math.floor((y - GRID_LOW[1]) / COVERAGE_CELL)
-    if not (0 <= ix < 20 and 0 <= iy < 20):
-        return None
-    cx = GRID_LOW[0] + (ix + 0.5) * COVERAGE_CELL
-    cy = GRID_LOW[1] + (iy + 0.5) * COVERAGE_CELL
-    if WALL[0][0] <= cx <= WALL[0][1] and WALL[1][0] <= cy <= WALL[1][1]:
-        return None
-    return ix, iy
-
-
 @functools.lru_cache(maxsize=1)
 def read_store(checkpoint):
     """The trajectory store of a graph-service checkpoint (observations, latents, episode ids,
@@ -120,9 +105,9 @@ def read_store(checkpoint):
     return read_tensors(os.path.join(checkpoint, "store.safetensors"), ["obs", "latents", "episode", "len"])
 
 
-def episode_figures(checkpoint, fr=frozenset()):
+def episode_figures(checkpoint, maze, fr=frozenset()):
     """(episode number, reach, cells, new, new w/o FR) per stored trajectory, in episode order;
-    `fr`: the FR episodes' numbers."""
+    `maze`: the run's maze_path.MazePath; `fr`: the FR episodes' numbers."""
     store = read_store(checkpoint)
     obs, (_, obs_dim) = store["obs"]
     episodes, _ = store["episode"]
@@ -135,8 +120,8 @@ def episode_figures(checkpoint, fr=frozenset()):
     for index in sorted(range(len(episodes)), key=lambda i: episodes[i]):
         begin, end = starts[index], starts[index] + lengths[index]
         xy = [(obs[obs_dim * j], obs[obs_dim * j + 1]) for j in range(begin, end)]
-        reach = max(along_u(x, y) for x, y in xy)
-        cells = {free_cell(x, y) for x, y in xy} - {None}
+        reach = max(maze.progress(x, y) for x, y in xy)
+        cells = {maze.coverage_cell(x, y) for x, y in xy} - {None}
         number = episodes[index] + 1
         new, new_ordinary = len(cells - seen), len(cells - seen_ordinary)
         seen |= cells
@@ -146,7 +131,7 @@ def episode_figures(checkpoint, fr=frozenset()):
     return rows
 
 
-def potential_by_s(checkpoint):
+def potential_by_s(checkpoint, maze):
     """({2 m bin start: summed potential}, unplaced potential, total potential)."""
     maps = read_tensors(os.path.join(checkpoint, "maps.safetensors"), ["potential.keys", "potential.values"])
     store = read_store(checkpoint)
@@ -155,7 +140,7 @@ def potential_by_s(checkpoint):
     where = {}
     for j in range(n_states):
         key = tuple(math.floor(latents[latent_dim * j + i] / COUNT_CELL) for i in range(latent_dim))
-        where.setdefault(key, []).append(along_u(obs[obs_dim * j], obs[obs_dim * j + 1]))
+        where.setdefault(key, []).append(maze.progress(obs[obs_dim * j], obs[obs_dim * j + 1]))
     keys, _ = maps["potential.keys"]
     values, _ = maps["potential.values"]
     bins, unplaced = {}, 0.0
@@ -195,7 +180,8 @@ def main(args):
     for run in run_dirs:
         checkpoint = newest_checkpoint(run)
         fr = fr_episode_numbers(os.path.join(run, "metrics.jsonl"))
-        rows = episode_figures(checkpoint, fr)
+        maze = maze_path.for_run(run)
+        rows = episode_figures(checkpoint, maze, fr)
         print(f"== {run}: {len(rows)} stored episodes ({os.path.basename(checkpoint)}), {len(fr)} FR")
         covered = value_at(os.path.join(run, "metrics.jsonl"), "learner/charts/coverage_free_cells_visited", len(rows))
         if covered is not None and covered != sum(r[3] for r in rows):
@@ -209,7 +195,7 @@ def main(args):
                     f"ordinary {summary([r for r in stretch if r[0] not in fr])}"
                 )
         if potential:
-            bins, unplaced, total = potential_by_s(checkpoint)
+            bins, unplaced, total = potential_by_s(checkpoint, maze)
             cells = " ".join(f"{s}-{s + 2}: {bins[s]:.0f}" for s in sorted(bins))
             print(f"  potential {total:.0f} (unplaced {unplaced:.0f}) by s: {cells}")
     return 0

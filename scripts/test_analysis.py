@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py, store_reach.py) on hand-built inputs.
+"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py, store_reach.py, maze_path.py) on
+hand-built inputs.
 
     python3 scripts/test_analysis.py
 
@@ -17,7 +18,16 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import fr_outcomes  # noqa: E402
 import fr_trace  # noqa: E402
+import maze_path  # noqa: E402
 import store_reach  # noqa: E402
+
+# The `maze` object of `asi tasks antmaze-u --json` (the entries the scripts read).
+U_MAZE = {
+    "rows": ["#####", "#S..#", "###.#", "#G..#", "#####"],
+    "cell_size_m": 4.0,
+    "robot_cell": [1, 1],
+    "goal_box": [[-2.0, -2.0], [10.0, 10.0]],
+}
 
 
 def decision(episode, t, xy, phi, choice, subgoal, switch="None"):
@@ -112,11 +122,65 @@ class CoverageGains(unittest.TestCase):
         for (_, _, got), want in zip(gains, [0.03, 0.01, 0.05]):
             self.assertAlmostEqual(got, want, places=9)
 
-    def test_along_u(self):
-        # The U's centreline: (0,0) -> (8,0) -> (8,8) -> (0,8).
-        self.assertEqual(fr_outcomes.along_u(4.0, 0.5), 4.0)
-        self.assertEqual(fr_outcomes.along_u(8.5, 4.0), 12.0)
-        self.assertEqual(fr_outcomes.along_u(2.0, 8.0), 22.0)
+
+
+class MazePath(unittest.TestCase):
+    def test_progress_along_the_u(self):
+        u = maze_path.MazePath(U_MAZE)
+        # Centreline (0,0) -> (8,0) -> (8,8) -> (0,8); straight stretches give the coordinate
+        # along them: 4 in the first arm, 8 + y in the right arm, 16 + (8 - x) in the last.
+        for (x, y), s in [((4.0, 0.5), 4.0), ((8.5, 4.0), 12.0), ((2.0, 8.0), 22.0), ((0.0, 8.0), 24.0)]:
+            self.assertAlmostEqual(u.progress(x, y), s, places=9)
+        # Behind the start and beyond the goal's centre: clamped to the ends.
+        self.assertEqual(u.progress(-1.0, 0.5), 0.0)
+        self.assertEqual(u.progress(-1.5, 9.0), 24.0)
+        # Corner cell (8, 0): (7.5, 0.2) is 0.2 from the piece in (y = 0) and 0.5 from the
+        # piece out (x = 8): s = 7.5; (8.2, 1.5) is nearer the piece out: 8 + 1.5.
+        self.assertAlmostEqual(u.progress(7.5, 0.2), 7.5, places=9)
+        self.assertAlmostEqual(u.progress(8.2, 1.5), 9.5, places=9)
+        # In the inner wall block (cell (2, 1)) the nearest free centres are (0, 0) and (4, 0),
+        # 3.6 m away; the start cell comes first: (2, 3) projects to (2, 0), s = 2.
+        self.assertAlmostEqual(u.progress(2.0, 3.0), 2.0, places=9)
+
+    def test_progress_on_a_ring_takes_the_shorter_way(self):
+        # 1 m cells; the goal cell (3, 3), centre (2, 2), is 4 steps from the start both ways.
+        ring = maze_path.MazePath({
+            "rows": ["#####", "#S..#", "#.#.#", "#..G#", "#####"],
+            "cell_size_m": 1.0,
+            "robot_cell": [1, 1],
+            "goal_box": [[-0.5, -0.5], [2.5, 2.5]],
+        })
+        self.assertEqual(ring.steps[(3, 3)], 4)
+        self.assertAlmostEqual(ring.progress(2.0, 2.0), 4.0, places=9)
+        # 0.3 m before the goal's centre, coming from (3, 2): 3.5 + 0.2.
+        self.assertAlmostEqual(ring.progress(1.7, 2.0), 3.7, places=9)
+        # Down the left side: (0, 1) is one step from the start, (0, 2) two.
+        self.assertAlmostEqual(ring.progress(0.0, 1.0), 1.0, places=9)
+        self.assertAlmostEqual(ring.progress(0.0, 2.0), 2.0, places=9)
+
+    def test_coverage_cells_follow_the_metric_grid(self):
+        u = maze_path.MazePath(U_MAZE)
+        # 0.6 m cells from (-2, -2): (0.1, 0.1) -> (3, 3); (8.5, 4.0) -> (17, 10).
+        self.assertEqual(u.coverage_cell(0.1, 0.1), (3, 3))
+        self.assertEqual(u.coverage_cell(8.5, 4.0), (17, 10))
+        # 12 m / 0.6 m is 20 cells (not 21 by rounding); the far edge is in the last one.
+        self.assertEqual(u.coverage_cell(10.0, 10.0), (19, 19))
+        # The inner wall block and outside the goal box: no cell.
+        self.assertIsNone(u.coverage_cell(2.0, 3.0))
+        self.assertIsNone(u.coverage_cell(-2.5, 0.0))
+
+    @unittest.skipUnless(
+        os.environ.get("ASI_BIN") or any(
+            os.access(os.path.join(maze_path.ROOT, "target", p, "asi"), os.X_OK) for p in ("release", "debug")
+        ),
+        "no asi binary (cargo test builds target/debug/asi)",
+    )
+    def test_the_binary_describes_the_same_u(self):
+        maze_path.for_task.cache_clear()
+        u = maze_path.for_task("antmaze-u")
+        self.assertEqual((u.rows, u.size, u.robot), (U_MAZE["rows"], 4.0, (1, 1)))
+        self.assertEqual(u.goal_box, ((-2.0, -2.0), (10.0, 10.0)))
+        self.assertEqual(u.progress(0.0, 8.0), 24.0)
 
 
 def write_safetensors(path, tensors):
@@ -153,7 +217,7 @@ class StoreReach(unittest.TestCase):
             "episode": ("U64", [2], [1, 0]),
             "len": ("U64", [2], [3, 2]),
         })
-        # φ-cells of side 3: (0, 0) holds states at s 0.1, 0 and 11 -> median 0.1; (1, 1) holds
+        # φ-cells of side 3: (0, 0) holds states at s 0.1, 0 and 2 -> median 0.1; (1, 1) holds
         # the two states at s 12 and 12.1 -> median 12.05; (5, 5) holds none.
         write_safetensors(os.path.join(checkpoint, "maps.safetensors"), {
             "potential.keys": ("I32", [3, 2], [0, 0, 1, 1, 5, 5]),
@@ -178,21 +242,22 @@ class StoreReach(unittest.TestCase):
         self.assertEqual(store_reach.fr_episode_numbers(os.path.join(self.run, "metrics.jsonl")), {2})
 
     def test_episode_figures(self):
-        rows = store_reach.episode_figures(self.checkpoint)
-        # Episode 1: reach max(along_u(0, 0), along_u(2, 3)) = 11 (a wall point still has an
-        # s); one free cell, (3,3), new. Episode 2: reach along_u(8.5, 4.1) = 12.1; free cells
-        # (3,3) and (17,10), the second new.
+        u = maze_path.MazePath(U_MAZE)
+        rows = store_reach.episode_figures(self.checkpoint, u)
+        # Episode 1: reach max(s(0, 0), s(2, 3)) = 2 (a wall point counts in the nearest free
+        # cell, MazePath's test); one free cell, (3,3), new. Episode 2: reach s(8.5, 4.1) =
+        # 12.1; free cells (3,3) and (17,10), the second new.
         self.assertEqual([r[0] for r in rows], [1, 2])
         self.assertEqual([r[2:] for r in rows], [(1, 1, 1), (2, 1, 1)])
         # With episode 1 an FR episode, its cell (3,3) does not count against episode 2's
         # "new w/o FR": both of episode 2's cells are new to the ordinary episodes.
-        rows = store_reach.episode_figures(self.checkpoint, fr={1})
+        rows = store_reach.episode_figures(self.checkpoint, u, fr={1})
         self.assertEqual([r[2:] for r in rows], [(1, 1, 1), (2, 1, 2)])
-        self.assertAlmostEqual(rows[0][1], 11.0)
+        self.assertAlmostEqual(rows[0][1], 2.0)
         self.assertAlmostEqual(rows[1][1], 12.1, places=5)
 
     def test_potential_by_s(self):
-        bins, unplaced, total = store_reach.potential_by_s(self.checkpoint)
+        bins, unplaced, total = store_reach.potential_by_s(self.checkpoint, maze_path.MazePath(U_MAZE))
         self.assertEqual(bins, {0: 2.0, 12: 5.0})
         self.assertEqual((unplaced, total), (7.0, 14.0))
 
@@ -208,8 +273,9 @@ class StoreReach(unittest.TestCase):
 
         store_reach.read_tensors = counting
         try:
-            store_reach.episode_figures(self.checkpoint)
-            store_reach.potential_by_s(self.checkpoint)
+            u = maze_path.MazePath(U_MAZE)
+            store_reach.episode_figures(self.checkpoint, u)
+            store_reach.potential_by_s(self.checkpoint, u)
         finally:
             store_reach.read_tensors = original
         self.assertEqual(reads.count("store.safetensors"), 1)

@@ -31,8 +31,9 @@ pub enum Command {
     /// Measure throughput of a part of the system.
     #[command(subcommand)]
     Bench(BenchCommand),
-    /// List the registered task names.
-    Tasks,
+    /// List the registered task names, or describe one (`asi tasks antmaze-u [--json]`): maze
+    /// map, start, goals, episode length, observation and action sizes.
+    Tasks(crate::tasks_cmd::TasksArgs),
     /// Learning curves of several runs on one PNG: runs grouped into arms by name without the
     /// seed tag, mean over seeds with a 95 % confidence band, x axis env steps.
     Plot(PlotArgs),

@@ -14,6 +14,7 @@ mod plot;
 mod proc;
 mod run;
 mod serial;
+mod tasks_cmd;
 mod tensorboard;
 mod weights_file;
 
@@ -81,12 +82,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Graph(args) => graph_tool::run(&args),
         Command::Plot(args) => plot::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
-        Command::Tasks => {
-            for name in envs::registry::task_names() {
-                println!("{name}");
-            }
-            Ok(())
-        }
+        Command::Tasks(args) => tasks_cmd::run(&args),
     }
 }
 

@@ -267,6 +267,23 @@ impl Maze {
         self.cells().filter(|&c| self.is_wall(c))
     }
 
+    /// The map as rows in the layout notation (`#` wall, `.` free, `S` robot cell, `G` goal
+    /// cell); [`Maze::from_rows`] of them builds this maze again.
+    pub fn rows(&self) -> Vec<String> {
+        (0..self.n_rows)
+            .map(|i| {
+                (0..self.n_cols)
+                    .map(|j| match Cell::new(i, j) {
+                        c if c == self.robot_cell => START_CHAR,
+                        c if c == self.goal_cell => GOAL_CHAR,
+                        c if self.is_wall(c) => WALL_CHAR,
+                        _ => FREE_CHAR,
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
     /// The free-cell map, row-major (`true` = free), `n_rows × n_cols`.
     pub fn free_map(&self) -> Vec<Vec<bool>> {
         (0..self.n_rows)

@@ -323,3 +323,20 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn rows_give_back_the_layout_and_rebuild_the_same_maze() {
+    assert_eq!(
+        Maze::new(MazeLayout::U).rows(),
+        ["#####", "#S..#", "###.#", "#G..#", "#####"]
+    );
+    for layout in MazeLayout::ALL {
+        let maze = Maze::new(layout);
+        let rows = maze.rows();
+        let refs: Vec<&str> = rows.iter().map(String::as_str).collect();
+        let again = Maze::from_rows(&refs, maze.cell_size_m(), maze.max_steps()).expect("valid");
+        assert_eq!(again.free_map(), maze.free_map(), "{layout:?}");
+        assert_eq!(again.robot_cell(), maze.robot_cell(), "{layout:?}");
+        assert_eq!(again.goal_cell(), maze.goal_cell(), "{layout:?}");
+    }
+}
