@@ -24,6 +24,9 @@ of three figures per episode:
   gain in cells. Summed over all episodes it is `charts/coverage_free_cells_visited` on the
   metrics line of the store's last episode, which the script checks (a mismatch means the store and the metric
   disagree, e.g. an evicted store);
+- `moved`: how far the torso moved per 20 env steps (c, a high-level segment: the straight xy
+  distance from the segment's first state to its last, averaged over the episode's segments),
+  the robot's speed at the pace its subgoals are set;
 - `new w/o FR`: cells no earlier *ordinary* episode had entered, as if the FR episodes'
   visits did not count. For an ordinary episode of ASI against an episode of HESS (which has
   no FR episodes, so there the two columns agree) it removes the bookkeeping: an ordinary
@@ -50,6 +53,7 @@ import maze_path
 from fr_outcomes import options, records
 
 COUNT_CELL = 3.0
+SEGMENT = 20  # hierarchy.c: env steps per high-level decision
 STRETCHES = [(101, 250), (251, 500)]
 DTYPES = {"F32": "f", "F64": "d", "I32": "i", "U32": "I", "U64": "Q", "U8": "B"}
 
@@ -106,8 +110,8 @@ def read_store(checkpoint):
 
 
 def episode_figures(checkpoint, maze, fr=frozenset()):
-    """(episode number, reach, cells, new, new w/o FR) per stored trajectory, in episode order;
-    `maze`: the run's maze_path.MazePath; `fr`: the FR episodes' numbers."""
+    """(episode number, reach, cells, new, new w/o FR, moved) per stored trajectory, in episode
+    order; `maze`: the run's maze_path.MazePath; `fr`: the FR episodes' numbers."""
     store = read_store(checkpoint)
     obs, (_, obs_dim) = store["obs"]
     episodes, _ = store["episode"]
@@ -127,7 +131,9 @@ def episode_figures(checkpoint, maze, fr=frozenset()):
         seen |= cells
         if number not in fr:
             seen_ordinary |= cells
-        rows.append((number, reach, len(cells), new, new_ordinary))
+        moves = [math.dist(xy[j], xy[j + SEGMENT]) for j in range(0, len(xy) - SEGMENT, SEGMENT)]
+        moved = sum(moves) / len(moves) if moves else 0.0
+        rows.append((number, reach, len(cells), new, new_ordinary, moved))
     return rows
 
 
@@ -171,7 +177,9 @@ def summary(rows):
     cells = sum(r[2] for r in rows) / n
     new = sum(r[3] for r in rows) / n
     new_ordinary = sum(r[4] for r in rows) / n
-    return f"n={n} reach {reach:.1f} m, cells {cells:.1f}, new {new:.2f}, new w/o FR {new_ordinary:.2f}"
+    moved = sum(r[5] for r in rows) / n
+    return (f"n={n} reach {reach:.1f} m, cells {cells:.1f}, new {new:.2f}, new w/o FR {new_ordinary:.2f}, "
+            f"moved {moved:.2f} m/{SEGMENT} steps")
 
 
 def main(args):

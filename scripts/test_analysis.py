@@ -17,6 +17,7 @@ import unittest
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import fr_outcomes  # noqa: E402
+import count_choice  # noqa: E402
 import fr_trace  # noqa: E402
 import maze_path  # noqa: E402
 import store_reach  # noqa: E402
@@ -248,11 +249,13 @@ class StoreReach(unittest.TestCase):
         # cell, MazePath's test); one free cell, (3,3), new. Episode 2: reach s(8.5, 4.1) =
         # 12.1; free cells (3,3) and (17,10), the second new.
         self.assertEqual([r[0] for r in rows], [1, 2])
-        self.assertEqual([r[2:] for r in rows], [(1, 1, 1), (2, 1, 1)])
+        self.assertEqual([r[2:5] for r in rows], [(1, 1, 1), (2, 1, 1)])
+        # Both episodes are shorter than one 20-step segment: nothing moved per segment.
+        self.assertEqual([r[5] for r in rows], [0.0, 0.0])
         # With episode 1 an FR episode, its cell (3,3) does not count against episode 2's
         # "new w/o FR": both of episode 2's cells are new to the ordinary episodes.
         rows = store_reach.episode_figures(self.checkpoint, u, fr={1})
-        self.assertEqual([r[2:] for r in rows], [(1, 1, 1), (2, 1, 2)])
+        self.assertEqual([r[2:5] for r in rows], [(1, 1, 1), (2, 1, 2)])
         self.assertAlmostEqual(rows[0][1], 2.0)
         self.assertAlmostEqual(rows[1][1], 12.1, places=5)
 
@@ -280,6 +283,70 @@ class StoreReach(unittest.TestCase):
             store_reach.read_tensors = original
         self.assertEqual(reads.count("store.safetensors"), 1)
         self.assertEqual(reads.count("maps.safetensors"), 1)
+
+
+class SegmentMoves(unittest.TestCase):
+    def test_moved_per_segment(self):
+        # One 41-state episode walking +0.1 m in x per step from (0, 0.5): segments 0->20 and
+        # 20->40 both move 2.0 m; the last state starts no segment of its own.
+        run = tempfile.mkdtemp()
+        checkpoint = os.path.join(run, "ckpt-000001")
+        os.makedirs(checkpoint)
+        xy = [(0.1 * j, 0.5) for j in range(41)]
+        write_safetensors(os.path.join(checkpoint, "store.safetensors"), {
+            "obs": ("F32", [41, 2], [v for p in xy for v in p]),
+            "latents": ("F32", [41, 2], [0.0] * 82),
+            "episode": ("U64", [1], [0]),
+            "len": ("U64", [1], [41]),
+        })
+        store_reach.read_store.cache_clear()
+        try:
+            rows = store_reach.episode_figures(checkpoint, maze_path.MazePath(U_MAZE))
+        finally:
+            import shutil
+            shutil.rmtree(run)
+            store_reach.read_store.cache_clear()
+        self.assertEqual(len(rows), 1)
+        self.assertAlmostEqual(rows[0][5], 2.0, places=5)
+        self.assertAlmostEqual(rows[0][1], 4.0, places=5)  # reach: x = 4.0 along the first arm
+
+
+class CountChoice(unittest.TestCase):
+    @staticmethod
+    def trajectories():
+        # Episode numbers 100-102, 41 states each, all in one 3.0-cell: 100 and 101 in (0, 0),
+        # 102 in (1, 0). The xy parts are not used here.
+        return {
+            100: ([(0.5, 0.5)] * 41, None),
+            101: ([(0.5, 0.5)] * 41, None),
+            102: ([(3.5, 0.5)] * 41, None),
+        }
+
+    def test_visits_count_after_the_explore_start_only(self):
+        trajectories = self.trajectories()
+        self.assertEqual(count_choice.recount(trajectories, {100, 101, 102}), {(0, 0): 41, (1, 0): 41})
+        self.assertEqual(count_choice.recount(trajectories, {100}), {})
+
+    def test_future_map_by_hand(self):
+        trajectories = self.trajectories()
+        visits = count_choice.recount(trajectories, {101})
+        # Episode 101's decision states are its states 20 and 40, both in (0, 0) with 41
+        # visits: N_2 = 41, N_1 = 41 + 0.99 * 41 = 81.59; F = (41 + 81.59 + 1) / (2 + 1).
+        future = count_choice.future_map(trajectories, {101}, visits)
+        self.assertEqual(set(future), {(0, 0)})
+        self.assertAlmostEqual(future[(0, 0)], (41 + 81.59 + 1) / 3, places=9)
+        # Episode 102 in too, but its visits not counted: its samples in (1, 0) have N = 0,
+        # so F = (0 + 0 + 1) / 3 there.
+        future = count_choice.future_map(trajectories, {101, 102}, visits)
+        self.assertAlmostEqual(future[(1, 0)], 1 / 3, places=9)
+
+    def test_choose_takes_the_lowest_score_within_the_radius(self):
+        latents = [(0.0, 0.0), (25.0, 0.0), (3.0, 0.0), (-3.0, 0.0)]
+        scores = {(3.0, 0.0): 5.0, (-3.0, 0.0): 2.0}
+        score = lambda p: scores.get(p, 0.0)  # noqa: E731
+        # Draw 0 is the start itself (distance 0) and draw 1 is beyond 20: neither qualifies.
+        self.assertEqual(count_choice.choose((0.0, 0.0), [0, 1, 2, 3], latents, score), 3)
+        self.assertEqual(count_choice.choose((0.0, 0.0), [1, 0], latents, score), 1)
 
 
 if __name__ == "__main__":
