@@ -25,7 +25,7 @@ use learner::learner::checkpoint::{
 use protocol::{ControlCommand, ControlMessage};
 
 use crate::channels::Channels;
-use crate::proc::common::{node, task_info};
+use crate::proc::common::{catch_termination_signals, node, task_info};
 use crate::run::{RunContext, RunLock};
 use children::{ChildKind, Children};
 use metrics::MetricsBook;
@@ -58,6 +58,10 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
     let layout = task_info(config)?.layout;
     let node = node(&ctx, "launcher")?;
+    if catch_termination_signals(&node) {
+        tracing::info!("stopped by signal while starting; nothing was started");
+        return Ok(());
+    }
     clean_stale_resources(&node);
     let channels = Channels::new(config, &ctx.run_id, &layout);
     let metrics_in = channels.metrics_subscriber(&node)?;
