@@ -130,10 +130,13 @@ pub struct ChunkOutcome {
 
 /// The buffers a stored chunk feeds.
 pub struct Buffers<'a> {
-    /// Low-level replay (every step).
-    pub low: &'a mut LowReplay,
-    /// High-level replay (completed segments).
-    pub high: &'a mut HighReplay,
+    /// Low-level replay (every step); `None` keeps the chunk's steps out of it (an FR episode's
+    /// chunk with `asi.fr_in_low_replay = false`).
+    pub low: Option<&'a mut LowReplay>,
+    /// High-level replay (completed segments); `None` keeps the episode's segments out of it
+    /// (an FR episode's chunk with `asi.fr_in_high_replay = false`). The choice must be the same
+    /// for every chunk of an episode, as the FR flag is.
+    pub high: Option<&'a mut HighReplay>,
     /// φ observation store (an episode's states when it ends).
     pub phi: &'a mut PhiStore,
     /// SI buffer (every step, SI on or off).
@@ -178,8 +181,8 @@ impl Episodes {
         }
     }
 
-    /// Stores a checked chunk: every step into `low`, completed segments into `high`, the
-    /// episode's raw states into `phi` once it ends (or a run of them at a gap).
+    /// Stores a checked chunk: every step into `low`, completed segments into `high` (each when
+    /// given), the episode's raw states into `phi` once it ends (or a run of them at a gap).
     pub fn store(
         &mut self,
         header: &TrajectoryHeader,
@@ -187,7 +190,12 @@ impl Episodes {
         steps: &[StepView],
         buffers: Buffers<'_>,
     ) -> ChunkOutcome {
-        let Buffers { low, high, phi, si } = buffers;
+        let Buffers {
+            mut low,
+            mut high,
+            phi,
+            si,
+        } = buffers;
         self.clock += 1;
         let key = (header.actor_id, header.episode_id);
         let entry = self.open.entry(key).or_default();
@@ -202,14 +210,20 @@ impl Episodes {
         entry.touched = self.clock;
         entry.far_goal |= header.flags.contains(TrajectoryFlags::FAR_GOAL);
         for step in steps {
-            low.push(&low_transition(step));
-            outcome.high_added += advance_segment(&mut entry.segment, step, high);
+            if let Some(low) = low.as_deref_mut() {
+                low.push(&low_transition(step));
+            }
+            if let Some(high) = high.as_deref_mut() {
+                outcome.high_added += advance_segment(&mut entry.segment, step, high);
+            }
             entry.states.push_step(step.obs, step.next_obs);
             entry.success |= step.success;
             push_si(si, &mut entry.si_episode, step);
         }
         if header.flags.contains(TrajectoryFlags::EPISODE_END) {
-            outcome.high_added += close_at_end(&mut entry.segment, steps, high);
+            if let Some(high) = high.as_deref_mut() {
+                outcome.high_added += close_at_end(&mut entry.segment, steps, high);
+            }
             outcome.far_goal_success = entry.far_goal && entry.success;
             let states = std::mem::take(&mut entry.states);
             states.end(phi, header.flags.contains(TrajectoryFlags::PHYSICS_FAILURE));

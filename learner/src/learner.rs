@@ -40,8 +40,8 @@ use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
 use nets::{spec_from_config, NetsSpec, TaskDims};
 use protocol::{
-    Config, PhiVersion, PolicyVersion, RunSchedule, StepLayout, StepView, TrajectoryHeader,
-    WeightsHeader,
+    Config, PhiVersion, PolicyVersion, RunSchedule, StepLayout, StepView, TrajectoryFlags,
+    TrajectoryHeader, WeightsHeader,
 };
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -161,6 +161,15 @@ pub struct Learner {
     phi: PhiTrainer,
     schedule: ScheduleTracker,
     si: SelfImitation,
+    fr_replay: FrReplay,
+}
+
+/// Which replay buffers an FR episode's transitions go to (`asi.fr_in_low_replay`,
+/// `asi.fr_in_high_replay`; both by default, as the released code).
+#[derive(Debug, Clone, Copy)]
+struct FrReplay {
+    low: bool,
+    high: bool,
 }
 
 impl Learner {
@@ -232,6 +241,10 @@ impl Learner {
             phi_version: PhiVersion(0),
             publish: PublishState::default(),
             publish_interval_steps: u64::from(config.transport.weights_check_interval_steps),
+            fr_replay: FrReplay {
+                low: config.asi.fr_in_low_replay,
+                high: config.asi.fr_in_high_replay,
+            },
             telemetry: Telemetry::default(),
             phi_store,
             phi,
@@ -260,9 +273,10 @@ impl Learner {
         if let crate::ingest::Continuity::Gap { lost } = continuity {
             self.stats.lost_chunks += lost;
         }
+        let fr = header.flags.contains(TrajectoryFlags::FRONTIER);
         let buffers = Buffers {
-            low: &mut self.low_replay,
-            high: &mut self.high_replay,
+            low: (!fr || self.fr_replay.low).then_some(&mut self.low_replay),
+            high: (!fr || self.fr_replay.high).then_some(&mut self.high_replay),
             phi: &mut self.phi_store,
             si: self.si.buffer_mut(),
         };

@@ -273,3 +273,57 @@ fn episodes_of_different_actors_with_the_same_id_are_kept_apart() {
         vec![2, 2]
     );
 }
+
+/// Ingests episode `ep` of actor 0 (10 steps, decisions every 2, two chunks) with `extra` flags
+/// on every chunk.
+fn episode_with_flags(l: &mut learner::Learner, ep: u64, extra: u32) {
+    let all = steps(0..10, ep, 2, 9);
+    ingest(l, 0, ep, 0, &all[0..5], START | extra).unwrap();
+    ingest(l, 0, ep, 1, &all[5..10], END | extra).unwrap();
+}
+
+#[test]
+fn fr_episodes_feed_both_replays_unless_switched_out() {
+    // Default: an FR episode is stored like any other, 10 low transitions and 5 segments.
+    let mut l = learner();
+    episode_with_flags(&mut l, 1, TrajectoryFlags::FRONTIER);
+    episode_with_flags(&mut l, 2, 0);
+    assert_eq!(l.low_replay().ring().len(), 20);
+    assert_eq!(l.high_replay().ring().len(), 10);
+    for (low, high, want_low, want_high) in [
+        (false, true, 10, 10),
+        (true, false, 20, 5),
+        (false, false, 10, 5),
+    ] {
+        let mut config = config();
+        config.asi.fr_in_low_replay = low;
+        config.asi.fr_in_high_replay = high;
+        let mut l = learner::Learner::new(&config, DIMS, 7).unwrap();
+        episode_with_flags(&mut l, 1, TrajectoryFlags::FRONTIER);
+        episode_with_flags(&mut l, 2, 0);
+        let switches = format!("fr_in_low_replay={low} fr_in_high_replay={high}");
+        assert_eq!(l.low_replay().ring().len(), want_low, "{switches}");
+        assert_eq!(l.high_replay().ring().len(), want_high, "{switches}");
+        // What is kept is the ordinary episode's (obs[1] is the episode id), and the episode,
+        // its env steps and the φ store count both episodes either way.
+        if !low {
+            assert!(
+                (0..10).all(|i| l.low_replay().get(i).obs[1] == 2.0),
+                "{switches}"
+            );
+        }
+        if !high {
+            assert!(
+                (0..5).all(|i| l.high_replay().get(i).obs[1] == 2.0),
+                "{switches}"
+            );
+        }
+        let stats = l.ingest_stats();
+        assert_eq!(
+            (stats.episodes_completed, stats.env_steps),
+            (2, 20),
+            "{switches}"
+        );
+        assert_eq!(stats.high_transitions, want_high as u64, "{switches}");
+    }
+}

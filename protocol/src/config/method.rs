@@ -381,6 +381,16 @@ pub struct AsiConfig {
     /// explore segments feed the potential, so failed FR walks toward the frontier do not
     /// steer the ordinary episodes' explore subgoals away from it).
     pub fr_potential_reports: FrPotentialReports,
+    /// The learner stores an FR episode's steps in the low level's replay. Default true
+    /// (source: code, every stored step trains the low level). false is an experiment, not in
+    /// the paper: the low level then learns only from ordinary episodes (and the noise-free FR
+    /// walks do not shape it); `replay/low_size` then trails `ingest/env_steps`.
+    pub fr_in_low_replay: bool,
+    /// The learner stores an FR episode's segments in the high level's replay. Default true
+    /// (source: code, whose high buffer stores `subgoal − ag` for FR decisions too). false is
+    /// an experiment, not in the paper: the high level learns only from ordinary episodes, and
+    /// makes one update per stored transition, so fewer in all.
+    pub fr_in_high_replay: bool,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
     /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code.
@@ -465,6 +475,8 @@ impl Default for AsiConfig {
             near_frontier: NearFrontier::CountMode,
             fr_noise_free_low: true,
             fr_potential_reports: FrPotentialReports::CountDraw,
+            fr_in_low_replay: true,
+            fr_in_high_replay: true,
             si_start_episode: 300,
             si_alpha: 0.01,
             si_beta: 0.001,
