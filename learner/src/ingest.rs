@@ -221,7 +221,7 @@ impl Episodes {
             push_si(si, &mut entry.si_episode, step);
         }
         if header.flags.contains(TrajectoryFlags::EPISODE_END) {
-            if let Some(high) = high.as_deref_mut() {
+            if let Some(high) = high {
                 outcome.high_added += close_at_end(&mut entry.segment, steps, high);
             }
             outcome.far_goal_success = entry.far_goal && entry.success;
