@@ -62,7 +62,9 @@ pub fn node(ctx: &RunContext, role: &str) -> anyhow::Result<Node<Ipc>> {
 /// arrived since (the check consumes it). iceoryx2 installs its handlers lazily, on a process's
 /// first termination check (`Node::wait`), not when the node is created; until then SIGTERM has
 /// its default action and ends the process at once. The launcher calls this before it spawns
-/// anything, so that a signal while the services start is caught and stops them in order.
+/// anything, so that a signal while the services start is caught and stops them in order. The
+/// children do not: a SIGTERM during their own start-up (before their first [`StopWatch`]
+/// check) ends them at once, which loses nothing, as they hold no data yet.
 pub fn catch_termination_signals(node: &Node<Ipc>) -> bool {
     node.wait(Duration::ZERO).is_err()
 }
