@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py, store_reach.py, maze_path.py) on
-hand-built inputs.
+"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py, store_reach.py, maze_path.py,
+count_choice.py) on hand-built inputs.
 
     python3 scripts/test_analysis.py
 
