@@ -22,6 +22,9 @@
 //! - `FAR_GOAL` is set on every chunk of an episode whose goal is a far goal
 //!   (`Maze::is_far_goal_with_fraction` with `exploration.far_goal_fraction`; tasks without a
 //!   maze have no far goals, as the code's `g_y ≥ 8` rule never holds for the cheetah).
+//! - `FRONTIER` is set on every chunk of an FR episode (one that got a frontier and route at its
+//!   start; an FR draw that fell back to a normal episode is not one), also after its FR mode
+//!   ended; the learner's `asi.fr_in_low_replay` / `asi.fr_in_high_replay` act on it.
 //! - Every chunk is non-empty; chunk indices of an episode run 0, 1, 2, … without gaps;
 //!   `EPISODE_START` marks exactly the first chunk and `EPISODE_END` exactly the last.
 //! - Episode ids are `(actor_id << 40) | local episode index` ([`crate::seeds::episode_id`]),
@@ -372,6 +375,9 @@ impl Actor {
         }
         if episode.far_goal {
             flags |= TrajectoryFlags::FAR_GOAL;
+        }
+        if episode.frontier.is_some() {
+            flags |= TrajectoryFlags::FRONTIER;
         }
         let cut = self.buffer.cut(n_records, self.stats.policy_version);
         let mut header = header_for(&self.header_template, &cut, episode.next_chunk_index, flags);

@@ -374,6 +374,10 @@ fn far_goal_is_flagged_on_every_chunk_of_exactly_the_far_goal_episodes() {
                 far,
                 "goal {goal:?}"
             );
+            assert!(
+                !chunk.header.flags.contains(F::FRONTIER),
+                "no FR episode is drawn in the first 40 (FR starts after episode 200)"
+            );
         }
         assert_eq!(actor.stats().last_episode_far_goal, far);
         if far {

@@ -554,6 +554,10 @@ fn an_fr_episode_follows_the_route_with_waypoints_k_nodes_ahead_and_a_far_goal()
         chunks.iter().all(|c| c.header.flags.contains(F::FAR_GOAL)),
         "FR episodes get a far goal"
     );
+    assert!(
+        chunks.iter().all(|c| c.header.flags.contains(F::FRONTIER)),
+        "every chunk of an FR episode is flagged FRONTIER"
+    );
     let maze = envs::make("pointmaze-u").unwrap();
     let goal = [records[0].goal[0], records[0].goal[1]];
     assert!(maze
