@@ -609,7 +609,17 @@ impl BenchRun {
             N_CHUNK_PUBLISHERS,
             N_CHUNK_SUBSCRIBERS,
         );
-        let (publishers, subscribers) = run_measurement(&receivers, &senders, self.seconds)?;
+        // iceoryx2: publishers first. A subscriber attaches its end of a publisher's connection
+        // when it is created or next receives; a publisher whose subscriber has not attached
+        // yet fills that subscriber's buffer and then, with safe overflow off, *skips* it (no
+        // error: the receiver counts as not connected). Subscribers created after the
+        // publishers attach at creation, so nothing is skipped. Sockets need the listener
+        // first.
+        let order = match setup.transport() {
+            Transport::Iceoryx2 => StartOrder::SendersFirst,
+            Transport::Uds => StartOrder::ReceiversFirst,
+        };
+        let (publishers, subscribers) = run_measurement(&receivers, &senders, order, self.seconds)?;
         let floats = layout.record_len() * self.chunk_steps as usize;
         let chunk_bytes =
             std::mem::size_of::<TrajectoryHeader>() + floats * std::mem::size_of::<f32>();
@@ -629,7 +639,12 @@ impl BenchRun {
         let spec = self.next_spec(transport, &layout, weights_len)?;
         let receivers = workers_of(&spec, Role::WeightsSubscriber, N_WEIGHTS_SUBSCRIBERS, 1);
         let senders = workers_of(&spec, Role::WeightsPublisher, 1, N_WEIGHTS_SUBSCRIBERS);
-        let (_, subscribers) = run_measurement(&receivers, &senders, self.seconds)?;
+        let (_, subscribers) = run_measurement(
+            &receivers,
+            &senders,
+            StartOrder::ReceiversFirst,
+            self.seconds,
+        )?;
         Ok(LatencySummary::of(&subscribers))
     }
 
@@ -638,7 +653,12 @@ impl BenchRun {
         let spec = self.next_spec(transport, &layout, 0)?;
         let receivers = workers_of(&spec, Role::RpcServer, 1, 1);
         let senders = workers_of(&spec, Role::RpcClient, 1, 1);
-        let (clients, _) = run_measurement(&receivers, &senders, self.seconds)?;
+        let (clients, _) = run_measurement(
+            &receivers,
+            &senders,
+            StartOrder::ReceiversFirst,
+            self.seconds,
+        )?;
         Ok(LatencySummary::of(&clients))
     }
 
@@ -671,28 +691,43 @@ fn workers_of(template: &WorkerSpec, role: Role, n: usize, n_peers: usize) -> Ve
         .collect()
 }
 
-/// Starts receivers, then senders; lets the senders go together; collects the senders'
-/// results, stops the receivers and collects theirs, then lets the senders exit.
+/// Which side of a measurement opens its ports first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum StartOrder {
+    ReceiversFirst,
+    SendersFirst,
+}
+
+/// Starts the workers of both sides in `order`, each side ready before the other starts; lets
+/// the senders go together; collects the senders' results, stops the receivers and collects
+/// theirs, then lets the senders exit.
 fn run_measurement(
     receivers: &[WorkerSpec],
     senders: &[WorkerSpec],
+    order: StartOrder,
     seconds: f64,
 ) -> anyhow::Result<(Vec<WorkerResult>, Vec<WorkerResult>)> {
     let finish = Duration::from_secs_f64(seconds) + FINISH_GRACE;
-    let mut rx: Vec<Worker> = receivers
-        .iter()
-        .map(Worker::spawn)
-        .collect::<anyhow::Result<_>>()?;
-    for worker in &mut rx {
-        worker.expect("ready", READY_TIMEOUT)?;
-    }
-    let mut tx: Vec<Worker> = senders
-        .iter()
-        .map(Worker::spawn)
-        .collect::<anyhow::Result<_>>()?;
-    for worker in &mut tx {
-        worker.expect("ready", READY_TIMEOUT)?;
-    }
+    let start = |specs: &[WorkerSpec]| -> anyhow::Result<Vec<Worker>> {
+        let mut workers: Vec<Worker> = specs
+            .iter()
+            .map(Worker::spawn)
+            .collect::<anyhow::Result<_>>()?;
+        for worker in &mut workers {
+            worker.expect("ready", READY_TIMEOUT)?;
+        }
+        Ok(workers)
+    };
+    let (mut rx, mut tx) = match order {
+        StartOrder::ReceiversFirst => {
+            let rx = start(receivers)?;
+            (rx, start(senders)?)
+        }
+        StartOrder::SendersFirst => {
+            let tx = start(senders)?;
+            (start(receivers)?, tx)
+        }
+    };
     for worker in &mut tx {
         worker.tell("go")?;
     }
@@ -852,8 +887,9 @@ pub fn run_worker(spec_json: &str) -> anyhow::Result<()> {
         (Role::RpcClient, Transport::Uds) => uds::rpc_client(&spec, &control),
     }
     .with_context(|| format!("{:?} over {}", spec.role, spec.transport.label()))?;
-    println!("result {}", serde_json::to_string(&result)?);
-    // Senders keep their ports open until the bench has collected the receivers' results.
+    if !control.reported() {
+        control.report(&result)?;
+    }
     control.wait_stop();
     Ok(())
 }
@@ -862,6 +898,8 @@ pub fn run_worker(spec_json: &str) -> anyhow::Result<()> {
 struct Control {
     go: mpsc::Receiver<()>,
     stopped: Arc<AtomicBool>,
+    /// The `result` line has been printed.
+    reported: AtomicBool,
 }
 
 impl Control {
@@ -877,7 +915,11 @@ impl Control {
             }
             flag.store(true, Ordering::SeqCst);
         });
-        Self { go, stopped }
+        Self {
+            go,
+            stopped,
+            reported: AtomicBool::new(false),
+        }
     }
 
     fn ready(&self) {
@@ -891,6 +933,28 @@ impl Control {
 
     fn stopped(&self) -> bool {
         self.stopped.load(Ordering::SeqCst)
+    }
+
+    /// Prints the worker's `result` line for the bench.
+    fn report(&self, result: &WorkerResult) -> anyhow::Result<()> {
+        println!("result {}", serde_json::to_string(result)?);
+        self.reported.store(true, Ordering::SeqCst);
+        Ok(())
+    }
+
+    fn reported(&self) -> bool {
+        self.reported.load(Ordering::SeqCst)
+    }
+
+    /// A sender's end: reports `result`, then waits for the bench's stop *while the caller
+    /// still holds its ports*. The bench stops senders only after every receiver has drained
+    /// and reported; a publisher dropped before that disconnects from subscribers that may
+    /// still hold its chunks, and some of those were seen lost (a few hundred chunks in one
+    /// run of several, on a loaded machine).
+    fn report_and_hold(&self, result: WorkerResult) -> anyhow::Result<WorkerResult> {
+        self.report(&result)?;
+        self.wait_stop();
+        Ok(result)
     }
 
     fn wait_stop(&self) {
@@ -1035,7 +1099,7 @@ mod iox {
             publisher.send(header, &payload)?;
             Ok(())
         })?;
-        Ok(WorkerResult {
+        control.report_and_hold(WorkerResult {
             sent,
             elapsed_secs,
             ..WorkerResult::default()
@@ -1083,7 +1147,7 @@ mod iox {
             std::thread::sleep(WEIGHTS_PERIOD);
             Ok(())
         })?;
-        Ok(WorkerResult {
+        control.report_and_hold(WorkerResult {
             sent,
             elapsed_secs,
             ..WorkerResult::default()
@@ -1271,7 +1335,7 @@ mod lossless {
             header.chunk_index = seq as u32;
             send(&publisher, &notifier, header, payload)
         })?;
-        Ok(WorkerResult {
+        control.report_and_hold(WorkerResult {
             sent,
             elapsed_secs,
             ..WorkerResult::default()
