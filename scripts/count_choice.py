@@ -34,7 +34,7 @@ import random
 import sys
 
 import maze_path
-from fr_outcomes import parse_stretches
+from fr_outcomes import options
 from store_reach import fr_episode_numbers, newest_checkpoint, read_store, read_tensors
 
 CELL = 3.0  # exploration.count_cell_size
@@ -174,28 +174,20 @@ def replay(run, stretches, n_decisions, seed):
               + f" | different choice {differ / len(sample):.0%}")
 
 
+def positive(text):
+    """An int above 0 (ValueError otherwise)."""
+    number = int(text)
+    if number <= 0:
+        raise ValueError("needs a positive number")
+    return number
+
+
 def main(args):
     stretches = [(101, 200), (201, 400), (401, 600), (601, 800), (801, 1000)]
-    n_decisions, seed, runs = 400, 0, []
-    rest = iter(args)
-    for arg in rest:
-        if arg == "--stretches":
-            stretches = parse_stretches(next(rest, "") or sys.exit("--stretches needs A-B,..."))
-        elif arg == "--decisions":
-            n_decisions = int(next(rest, "0"))
-            if n_decisions <= 0:
-                sys.exit("--decisions needs a positive number")
-        elif arg == "--seed":
-            seed = int(next(rest, "0"))
-        elif arg.startswith("-"):
-            sys.exit(f"unknown option {arg}\n{__doc__}")
-        else:
-            runs.append(arg)
-    if not runs:
-        print(__doc__, file=sys.stderr)
-        return 2
+    values = {"--decisions": (400, positive), "--seed": (0, int)}
+    stretches, given, runs = options(args, set(), stretches, __doc__, values)
     for run in runs:
-        replay(run, stretches, n_decisions, seed)
+        replay(run, stretches, given["--decisions"], given["--seed"])
     return 0
 
 

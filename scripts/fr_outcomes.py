@@ -120,19 +120,30 @@ def parse_stretches(text):
     return stretches
 
 
-def options(args, switches, stretches, usage):
-    """(stretches, the switches given, run folders) of `[--stretches A-B,...] [SWITCH...] RUN_DIR...`;
-    SystemExit with `usage` on an unknown option, and with `usage` and status 2 without a run."""
-    given, run_dirs = set(), []
+def options(args, switches, stretches, usage, values=None):
+    """(stretches, the options given, run folders) of `[--stretches A-B,...] [SWITCH...]
+    [OPTION VALUE...] RUN_DIR...`. `values` maps a value option to (default, convert); the
+    options given is a dict holding every value option (its default unless given) and the
+    switches given (True). SystemExit with `usage` on an unknown option, with a message on a
+    missing or invalid value, and with `usage` and status 2 without a run."""
+    values = values or {}
+    given = {name: default for name, (default, _) in values.items()}
+    run_dirs = []
     rest = iter(args)
     for arg in rest:
-        if arg == "--stretches":
+        if arg == "--stretches" or arg in values:
             value = next(rest, None)
             if value is None:
-                sys.exit("--stretches needs a value, e.g. 101-250,251-500")
-            stretches = parse_stretches(value)
+                sys.exit(f"{arg} needs a value")
+            if arg == "--stretches":
+                stretches = parse_stretches(value)
+                continue
+            try:
+                given[arg] = values[arg][1](value)
+            except ValueError as err:
+                sys.exit(f"{arg} {value}: {err}")
         elif arg in switches:
-            given.add(arg)
+            given[arg] = True
         elif arg.startswith("-"):
             sys.exit(f"unknown option {arg}\n{usage}")
         else:

@@ -349,5 +349,35 @@ class CountChoice(unittest.TestCase):
         self.assertEqual(count_choice.choose((0.0, 0.0), [1, 0], latents, score), 1)
 
 
+class Options(unittest.TestCase):
+    VALUES = {"--decisions": (400, count_choice.positive), "--seed": (0, int)}
+
+    def parse(self, args):
+        return fr_outcomes.options(args, {"--gain"}, [(1, 2)], "usage", self.VALUES)
+
+    def test_values_switches_and_runs(self):
+        stretches, given, runs = self.parse(["--seed", "3", "a", "--stretches", "5-9", "--gain", "b"])
+        self.assertEqual(stretches, [(5, 9)])
+        self.assertEqual(given, {"--decisions": 400, "--seed": 3, "--gain": True})
+        self.assertEqual(runs, ["a", "b"])
+        _, given, _ = self.parse(["a"])
+        self.assertNotIn("--gain", given)
+        self.assertEqual(given["--decisions"], 400)
+
+    def test_bad_input_exits_with_a_message(self):
+        for args, message in [
+            (["--decisions", "0", "a"], "--decisions 0: needs a positive number"),
+            (["--seed", "x", "a"], "--seed x: invalid literal"),
+            (["a", "--seed"], "--seed needs a value"),
+            (["--bogus", "a"], "unknown option --bogus"),
+        ]:
+            with self.assertRaises(SystemExit) as caught:
+                self.parse(args)
+            self.assertIn(message, str(caught.exception.code), args)
+        with self.assertRaises(SystemExit) as caught:
+            self.parse(["--seed", "1"])
+        self.assertEqual(caught.exception.code, 2)
+
+
 if __name__ == "__main__":
     unittest.main()
