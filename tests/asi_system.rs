@@ -1,7 +1,9 @@
 //! System test of the ASI parts (issue #6): the real `asi` binary in process mode on
 //! `configs/smoke.toml`, once with frontier-reaching episodes and self-imitation switched on
 //! early, once with both off (HESS), asserting from `metrics.jsonl` that FR episodes and SI
-//! steps happened (or did not). Each run has its own folder and run id and a watchdog.
+//! steps happened (or did not), and that the learner saw the FR episodes' chunks as such
+//! (`asi.fr_in_low_replay = false` kept exactly their steps out of the low replay). Each run
+//! has its own folder and run id and a watchdog.
 
 mod common;
 
@@ -50,11 +52,25 @@ fn fr_episodes_and_si_steps_run_when_on_and_stay_at_zero_when_off() {
             "asi.si_start_episode=6",
             "--set",
             "asi.fr_prob_schedule=[{from_episode=0,p=0.9}]",
+            "--set",
+            "asi.fr_in_low_replay=false",
         ],
     );
     on.wait_success();
     let m = on.last_metrics();
     assert!(sum(&m, "fr/episodes") > 0.0, "FR episodes: {m:?}");
+    // The actors flag FR chunks and the learner sees the flag: with FR steps kept out of the
+    // low replay (capacity far above the run's steps) it holds exactly the other steps.
+    let (steps, fr_steps) = (
+        sum(&m, "learner/ingest/env_steps"),
+        sum(&m, "learner/ingest/frontier_steps"),
+    );
+    assert!(fr_steps > 0.0 && fr_steps < steps, "{fr_steps} of {steps}");
+    assert_eq!(
+        sum(&m, "learner/replay/low_size"),
+        steps - fr_steps,
+        "{m:?}"
+    );
     assert!(sum(&m, "fr/waypoint_decisions") > 0.0, "waypoints: {m:?}");
     assert!(sum(&m, "si/steps") > 0.0, "SI steps: {m:?}");
     for loss in ["si/high_loss", "si/low_loss"] {
@@ -79,6 +95,7 @@ fn fr_episodes_and_si_steps_run_when_on_and_stay_at_zero_when_off() {
     off.wait_success();
     let m = off.last_metrics();
     assert_eq!(sum(&m, "fr/episodes"), 0.0, "{m:?}");
+    assert_eq!(sum(&m, "ingest/frontier_steps"), 0.0, "{m:?}");
     assert_eq!(sum(&m, "fr/waypoint_decisions"), 0.0, "{m:?}");
     assert_eq!(sum(&m, "si/steps"), 0.0, "{m:?}");
     assert!(

@@ -109,6 +109,9 @@ pub struct IngestStats {
     pub dropped_segments: u64,
     /// Open episodes abandoned because too many were open at once.
     pub abandoned_episodes: u64,
+    /// Env steps stored from chunks flagged `FRONTIER` (frontier-reaching episodes); counted
+    /// whether or not `asi.fr_in_low_replay` / `fr_in_high_replay` keep them out of a replay.
+    pub frontier_steps: u64,
 }
 
 /// Publication bookkeeping.
@@ -327,6 +330,9 @@ impl Learner {
         s.high_transitions += outcome.high_added;
         s.dropped_segments += outcome.segments_dropped;
         s.abandoned_episodes = self.episodes.n_abandoned();
+        if header.flags.contains(TrajectoryFlags::FRONTIER) {
+            s.frontier_steps += n_steps;
+        }
         if outcome.episode_ended {
             self.schedule.on_episode_end(outcome.far_goal_success);
             self.si.on_episode_end(self.schedule.train_episodes());
@@ -717,6 +723,7 @@ impl Learner {
             ("replay/open_episodes", self.episodes.n_open() as f64),
             ("ingest/chunks", s.chunks as f64),
             ("ingest/env_steps", s.env_steps as f64),
+            ("ingest/frontier_steps", s.frontier_steps as f64),
             ("ingest/lost_chunks", s.lost_chunks as f64),
             ("ingest/duplicate_chunks", s.duplicate_chunks as f64),
             ("ingest/rejected_chunks", s.rejected_chunks as f64),

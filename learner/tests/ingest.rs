@@ -325,5 +325,9 @@ fn fr_episodes_feed_both_replays_unless_switched_out() {
             "{switches}"
         );
         assert_eq!(stats.high_transitions, want_high as u64, "{switches}");
+        assert_eq!(
+            stats.frontier_steps, 10,
+            "the FR episode's steps, {switches}"
+        );
     }
 }

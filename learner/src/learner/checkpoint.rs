@@ -830,6 +830,9 @@ struct IngestState {
     high_transitions: u64,
     dropped_segments: u64,
     abandoned_episodes: u64,
+    /// Absent (0) in checkpoints written before FR steps were counted.
+    #[serde(default)]
+    frontier_steps: u64,
 }
 
 /// [`PublishState`] as saved.
@@ -884,6 +887,7 @@ impl State {
                 high_transitions: s.high_transitions,
                 dropped_segments: s.dropped_segments,
                 abandoned_episodes: s.abandoned_episodes,
+                frontier_steps: s.frontier_steps,
             },
             publish: PublishSaved {
                 published_once: p.published_once,
@@ -939,6 +943,7 @@ impl State {
             high_transitions: i.high_transitions,
             dropped_segments: i.dropped_segments,
             abandoned_episodes: i.abandoned_episodes,
+            frontier_steps: i.frontier_steps,
         };
         let p = self.publish;
         let (train_episodes, count_prob, fr_prob) = p.schedule_at_last;
