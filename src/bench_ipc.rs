@@ -25,6 +25,7 @@
 //! pipes: a worker prints `ready` when its ports are open and `result <json>` when done; the
 //! bench writes `go` to start senders and closes a worker's stdin to stop it.
 
+use std::cell::Cell;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
@@ -898,8 +899,8 @@ pub fn run_worker(spec_json: &str) -> anyhow::Result<()> {
 struct Control {
     go: mpsc::Receiver<()>,
     stopped: Arc<AtomicBool>,
-    /// The `result` line has been printed.
-    reported: AtomicBool,
+    /// The `result` line has been printed (only the worker's main thread reads or sets it).
+    reported: Cell<bool>,
 }
 
 impl Control {
@@ -918,7 +919,7 @@ impl Control {
         Self {
             go,
             stopped,
-            reported: AtomicBool::new(false),
+            reported: Cell::new(false),
         }
     }
 
@@ -938,12 +939,12 @@ impl Control {
     /// Prints the worker's `result` line for the bench.
     fn report(&self, result: &WorkerResult) -> anyhow::Result<()> {
         println!("result {}", serde_json::to_string(result)?);
-        self.reported.store(true, Ordering::SeqCst);
+        self.reported.set(true);
         Ok(())
     }
 
     fn reported(&self) -> bool {
-        self.reported.load(Ordering::SeqCst)
+        self.reported.get()
     }
 
     /// A sender's end: reports `result`, then waits for the bench's stop *while the caller
