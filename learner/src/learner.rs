@@ -330,11 +330,13 @@ impl Learner {
         s.high_transitions += outcome.high_added;
         s.dropped_segments += outcome.segments_dropped;
         s.abandoned_episodes = self.episodes.n_abandoned();
-        if header.flags.contains(TrajectoryFlags::FRONTIER) {
+        let frontier = header.flags.contains(TrajectoryFlags::FRONTIER);
+        if frontier {
             s.frontier_steps += n_steps;
         }
         if outcome.episode_ended {
-            self.schedule.on_episode_end(outcome.far_goal_success);
+            self.schedule
+                .on_episode_end(outcome.far_goal_success, frontier);
             self.si.on_episode_end(self.schedule.train_episodes());
         }
         let lag = self
@@ -688,6 +690,10 @@ impl Learner {
             (
                 "schedule/window_far_goal_successes",
                 self.schedule.window_successes() as f64,
+            ),
+            (
+                "schedule/window_episodes",
+                self.schedule.window_episodes() as f64,
             ),
         ]
     }

@@ -347,6 +347,74 @@ fn another_network_layout_or_config_is_refused() {
     Learner::restore_checkpoint(&longer, DIMS, &ckpt).unwrap();
 }
 
+/// Replaces the checkpoint's `state.json` by `older` and re-seals the manifest (size and
+/// checksum), as an older build would have written it.
+fn rewrite_state(ckpt: &Path, older: &[u8]) {
+    fs::write(ckpt.join("state.json"), older).unwrap();
+    let mut manifest = read_manifest(ckpt);
+    let entry = manifest
+        .files
+        .iter_mut()
+        .find(|f| f.name == "state.json")
+        .unwrap();
+    entry.checksum = format!("{:016x}", checksum(older));
+    entry.bytes = older.len() as u64;
+    fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&manifest).unwrap()).unwrap();
+}
+
+/// `schedule/window_episodes` of `l`.
+fn window_episodes(l: &Learner) -> f64 {
+    let m = l.metrics();
+    m.iter()
+        .find(|(n, _)| *n == "schedule/window_episodes")
+        .unwrap()
+        .1
+}
+
+#[test]
+fn the_count_window_survives_a_checkpoint_and_an_older_checkpoint_derives_it() {
+    let dir = scratch("count-window");
+    let mut c = config();
+    c.asi.fr_in_count_window = false;
+    c.exploration.count_prob_interval_episodes = 4;
+    let mut l = Learner::new(&c, DIMS, 7).unwrap();
+    // Episodes 0-4, FR (every chunk flagged FRONTIER, as the actor sends them) at 1 and 3: the
+    // window holds 0, 2 and 4.
+    for ep in 0..5u64 {
+        let fr = if ep % 2 == 1 {
+            protocol::TrajectoryFlags::FRONTIER
+        } else {
+            0
+        };
+        let records = steps(0..10, ep, 2, 9);
+        let start = protocol::TrajectoryFlags::EPISODE_START | fr;
+        ingest(&mut l, 0, ep, 0, &records[..5], start).unwrap();
+        let end =
+            protocol::TrajectoryFlags::EPISODE_END | protocol::TrajectoryFlags::TRUNCATED | fr;
+        ingest(&mut l, 0, ep, 1, &records[5..], end).unwrap();
+    }
+    assert_eq!(window_episodes(&l), 3.0);
+    let saved = l.save_checkpoint(&c, &dir).unwrap();
+    let (restored, _) = Learner::restore_checkpoint(&c, DIMS, &saved.path).unwrap();
+    assert_eq!(window_episodes(&restored), 3.0);
+    assert_eq!(restored.run_schedule(), l.run_schedule());
+
+    // A build before the switch wrote no window length and counted every episode: 5 mod 4.
+    let text = fs::read_to_string(saved.path.join("state.json")).unwrap();
+    let older: Vec<&str> = text
+        .lines()
+        .filter(|line| !line.trim_start().starts_with("\"count_window_episodes\":"))
+        .collect();
+    assert_eq!(
+        older.len(),
+        text.lines().count() - 1,
+        "the field is written"
+    );
+    rewrite_state(&saved.path, older.join("\n").as_bytes());
+    let (older, _) = Learner::restore_checkpoint(&c, DIMS, &saved.path).unwrap();
+    assert_eq!(window_episodes(&older), 1.0);
+}
+
 #[test]
 fn a_checkpoint_written_before_the_gradient_norms_existed_loads_with_them_at_zero() {
     let dir = scratch("before-grad-norms");
@@ -380,21 +448,7 @@ fn a_checkpoint_written_before_the_gradient_norms_existed_loads_with_them_at_zer
             }
         }
     }
-    let older = lines.join("\n").into_bytes();
-    fs::write(&file, &older).unwrap();
-    let mut manifest = read_manifest(&saved.path);
-    let entry = manifest
-        .files
-        .iter_mut()
-        .find(|f| f.name == "state.json")
-        .unwrap();
-    entry.checksum = format!("{:016x}", checksum(&older));
-    entry.bytes = older.len() as u64;
-    fs::write(
-        saved.path.join(MANIFEST),
-        serde_json::to_vec(&manifest).unwrap(),
-    )
-    .unwrap();
+    rewrite_state(&saved.path, lines.join("\n").as_bytes());
 
     let (restored, _) = Learner::restore_checkpoint(&config(), DIMS, &saved.path).unwrap();
     let norms = [

@@ -36,6 +36,12 @@ fn config() -> protocol::Config {
 /// One 10-step episode in two chunks; `far` sets FAR_GOAL on the first chunk only, `success`
 /// reports success at step 3 only (the code counts any success during the episode).
 fn episode(l: &mut Learner, ep: u64, far: bool, success: bool) {
+    episode_with(l, ep, far, success, 0);
+}
+
+/// [`episode`] with `extra` flags on both chunks (the actor flags every chunk of an FR episode
+/// `FRONTIER`).
+fn episode_with(l: &mut Learner, ep: u64, far: bool, success: bool, extra: u32) {
     let mut all = steps(0..10, ep, 2, 9);
     all[3].success = success;
     let far_bit = if far { TrajectoryFlags::FAR_GOAL } else { 0 };
@@ -45,10 +51,10 @@ fn episode(l: &mut Learner, ep: u64, far: bool, success: bool) {
         ep,
         0,
         &all[..5],
-        TrajectoryFlags::EPISODE_START | far_bit,
+        TrajectoryFlags::EPISODE_START | far_bit | extra,
     )
     .unwrap();
-    let end = TrajectoryFlags::EPISODE_END | TrajectoryFlags::TRUNCATED;
+    let end = TrajectoryFlags::EPISODE_END | TrajectoryFlags::TRUNCATED | extra;
     ingest(l, 0, ep, 1, &all[5..], end).unwrap();
 }
 
@@ -120,4 +126,63 @@ fn publications_carry_the_schedule_and_a_count_prob_change_is_published_without_
     assert_eq!(second.schedule.train_episodes, 4);
     close(second.schedule.count_prob, 0.047_425_873);
     assert_eq!(l.progress().updates_low, 0);
+}
+
+/// Seven episodes, FR ones (flagged `FRONTIER`) at 1, 2 and 5: ordinary far+success, FR
+/// far+success twice, ordinary far without success, ordinary far+success, FR far+success,
+/// ordinary success without a far goal. Returns the schedule after the fourth and the last.
+fn fr_mix(l: &mut Learner) -> (RunSchedule, RunSchedule) {
+    let fr = TrajectoryFlags::FRONTIER;
+    episode(l, 0, true, true);
+    episode_with(l, 1, true, true, fr);
+    episode_with(l, 2, true, true, fr);
+    episode(l, 3, true, false);
+    let fourth = l.run_schedule();
+    episode(l, 4, true, true);
+    episode_with(l, 5, true, true, fr);
+    episode(l, 6, false, true);
+    (fourth, l.run_schedule())
+}
+
+/// The window's contents: (`schedule/window_episodes`, `schedule/window_far_goal_successes`).
+fn window(l: &Learner) -> (f64, f64) {
+    let m = l.metrics();
+    let get = |name: &str| m.iter().find(|(n, _)| *n == name).unwrap().1;
+    (
+        get("schedule/window_episodes"),
+        get("schedule/window_far_goal_successes"),
+    )
+}
+
+#[test]
+fn fr_episodes_fill_the_count_window_by_default_as_in_the_code() {
+    let mut l = Learner::new(&config(), DIMS, 7).unwrap();
+    let (fourth, last) = fr_mix(&mut l);
+    // Window 1 = episodes 0-3: 3 far-goal successes (two of them FR), x = 1.5.
+    assert_eq!(fourth.train_episodes, 4);
+    close(fourth.count_prob, 0.119_202_922); // 1/(1+e^2)
+                                             // Episodes 4-6 open window 2: 2 far-goal successes so far.
+    assert_eq!(last.train_episodes, 7);
+    close(last.count_prob, 0.119_202_922);
+    assert_eq!(window(&l), (3.0, 2.0));
+}
+
+#[test]
+fn with_fr_out_of_the_count_window_a_window_holds_only_ordinary_episodes() {
+    let mut c = config();
+    c.asi.fr_in_count_window = false;
+    let mut l = Learner::new(&c, DIMS, 7).unwrap();
+    let (fourth, last) = fr_mix(&mut l);
+    // After episode 3 the window holds episodes 0 and 3 only: still open, count_prob at 1.
+    assert_eq!((fourth.train_episodes, fourth.count_prob), (4, 1.0));
+    // Episodes 0, 3, 4 and 6 close it: 2 far-goal successes (0 and 4), x = 1; the FR
+    // episodes' successes and the non-far success at 6 do not count.
+    assert_eq!(
+        last.train_episodes, 7,
+        "FR episodes still count as training episodes"
+    );
+    close(last.count_prob, 0.268_941_421); // 1/(1+e)
+    assert_eq!(window(&l), (0.0, 0.0));
+    // FR probability follows every training episode either way.
+    close(last.fr_prob, 0.3);
 }

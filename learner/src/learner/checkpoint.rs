@@ -721,6 +721,10 @@ struct State {
     ingest: IngestState,
     publish: PublishSaved,
     schedule: (u64, u64, f64),
+    /// Episodes in the current `count_prob` window (absent in checkpoints of builds before
+    /// `asi.fr_in_count_window`, whose windows were `train_episodes` modulo their length).
+    #[serde(default)]
+    count_window_episodes: Option<u64>,
     max_policy_lag: u64,
     sampling_rng: Pcg64Mcg,
     phi: PhiSaved,
@@ -900,7 +904,8 @@ impl State {
                     p.schedule_at_last.fr_prob,
                 ),
             },
-            schedule: l.schedule.counters(),
+            schedule: l.schedule.counters().0,
+            count_window_episodes: Some(l.schedule.counters().1),
             max_policy_lag: l.telemetry.max_policy_lag,
             sampling_rng: l.rng.clone(),
             telemetry: TelemetrySaved::of(l),
@@ -958,7 +963,8 @@ impl State {
                 fr_prob,
             },
         };
-        l.schedule.restore_counters(self.schedule);
+        l.schedule
+            .restore_counters(self.schedule, self.count_window_episodes);
         l.telemetry.max_policy_lag = self.max_policy_lag;
         l.rng = self.sampling_rng;
         let (_, rng, next_round, stats) = l.phi.restore_parts();

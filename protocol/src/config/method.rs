@@ -391,6 +391,13 @@ pub struct AsiConfig {
     /// an experiment, not in the paper: the high level learns only from ordinary episodes, and
     /// makes one update per stored transition, so fewer in all.
     pub fr_in_high_replay: bool,
+    /// An FR episode counts in the `count_prob` window (exploration.count_prob_interval_episodes
+    /// episodes, far-goal successes / count_prob_success_unit). Default true (source: code:
+    /// every training episode counts, and an FR episode always has a far goal although it
+    /// walks to the frontier, so it rarely succeeds). false is an experiment, not in the
+    /// paper: a window holds that many ordinary episodes and FR episodes are not counted, so
+    /// the count schedule follows the ordinary episodes' success rate as it does in HESS.
+    pub fr_in_count_window: bool,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
     /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code.
@@ -477,6 +484,7 @@ impl Default for AsiConfig {
             fr_potential_reports: FrPotentialReports::CountDraw,
             fr_in_low_replay: true,
             fr_in_high_replay: true,
+            fr_in_count_window: true,
             si_start_episode: 300,
             si_alpha: 0.01,
             si_beta: 0.001,
