@@ -92,12 +92,9 @@ impl ScheduleTracker {
     }
 
     /// The state that changes with episodes: `(train_episodes, window_successes, count_prob)`
-    /// and `window_episodes` (checkpoints).
-    pub(crate) fn counters(&self) -> ((u64, u64, f64), u64) {
-        (
-            (self.train_episodes, self.window_successes, self.count_prob),
-            self.window_episodes,
-        )
+    /// (checkpoints, with [`ScheduleTracker::window_episodes`]).
+    pub(crate) fn counters(&self) -> (u64, u64, f64) {
+        (self.train_episodes, self.window_successes, self.count_prob)
     }
 
     /// Sets the state saved by [`ScheduleTracker::counters`] (checkpoints). `window_episodes`

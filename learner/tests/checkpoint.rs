@@ -362,15 +362,6 @@ fn rewrite_state(ckpt: &Path, older: &[u8]) {
     fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&manifest).unwrap()).unwrap();
 }
 
-/// `schedule/window_episodes` of `l`.
-fn window_episodes(l: &Learner) -> f64 {
-    let m = l.metrics();
-    m.iter()
-        .find(|(n, _)| *n == "schedule/window_episodes")
-        .unwrap()
-        .1
-}
-
 #[test]
 fn the_count_window_survives_a_checkpoint_and_an_older_checkpoint_derives_it() {
     let dir = scratch("count-window");
@@ -393,10 +384,10 @@ fn the_count_window_survives_a_checkpoint_and_an_older_checkpoint_derives_it() {
             protocol::TrajectoryFlags::EPISODE_END | protocol::TrajectoryFlags::TRUNCATED | fr;
         ingest(&mut l, 0, ep, 1, &records[5..], end).unwrap();
     }
-    assert_eq!(window_episodes(&l), 3.0);
+    assert_eq!(metric(&l, "schedule/window_episodes"), 3.0);
     let saved = l.save_checkpoint(&c, &dir).unwrap();
     let (restored, _) = Learner::restore_checkpoint(&c, DIMS, &saved.path).unwrap();
-    assert_eq!(window_episodes(&restored), 3.0);
+    assert_eq!(metric(&restored, "schedule/window_episodes"), 3.0);
     assert_eq!(restored.run_schedule(), l.run_schedule());
 
     // A build before the switch wrote no window length and counted every episode: 5 mod 4.
@@ -412,7 +403,7 @@ fn the_count_window_survives_a_checkpoint_and_an_older_checkpoint_derives_it() {
     );
     rewrite_state(&saved.path, older.join("\n").as_bytes());
     let (older, _) = Learner::restore_checkpoint(&c, DIMS, &saved.path).unwrap();
-    assert_eq!(window_episodes(&older), 1.0);
+    assert_eq!(metric(&older, "schedule/window_episodes"), 1.0);
 }
 
 #[test]

@@ -146,11 +146,9 @@ fn fr_mix(l: &mut Learner) -> (RunSchedule, RunSchedule) {
 
 /// The window's contents: (`schedule/window_episodes`, `schedule/window_far_goal_successes`).
 fn window(l: &Learner) -> (f64, f64) {
-    let m = l.metrics();
-    let get = |name: &str| m.iter().find(|(n, _)| *n == name).unwrap().1;
     (
-        get("schedule/window_episodes"),
-        get("schedule/window_far_goal_successes"),
+        metric(l, "schedule/window_episodes"),
+        metric(l, "schedule/window_far_goal_successes"),
     )
 }
 
