@@ -9,10 +9,10 @@ use candle_core::{DType, Device, Tensor};
 use candle_nn::VarBuilder;
 use common::*;
 use learner::si::{SiStats, SI_PHI_MISMATCH_ATTEMPTS};
-use learner::{Learner, NoRouteSource};
+use learner::{Learner, NoRouteSource, RouteSource, RoutesReply};
 use nets::{spec_from_config, PolicySet};
-use protocol::graph::LatentPoint;
-use protocol::Config;
+use protocol::graph::{LatentPoint, NoRouteReason, RouteAnswer, RouteQuery};
+use protocol::{Config, PhiVersion};
 
 /// SI on or off, with room for every entry of the tests (1000).
 fn config(self_imitation: bool) -> Config {
@@ -244,4 +244,87 @@ fn the_si_metrics_are_reported() {
     assert_eq!(get("si/usable_fraction"), Some(1.0));
     assert!(get("si/high_loss").is_some_and(|v| v > 0.0));
     assert!(get("si/low_loss").is_some_and(|v| v > 0.0));
+}
+
+/// Answers every query as an unexplored goal would be answered: no route to φ(g̃); with a
+/// fallback origin a straight 6-node route from the start to a "frontier" 10 units along x, without one no
+/// route at all (as `graph_service::frontier::answer_route_query`).
+struct UnexploredGoals {
+    asked: Vec<RouteQuery>,
+}
+
+impl RouteSource for UnexploredGoals {
+    fn routes(&mut self, queries: &[RouteQuery], _phi_version: PhiVersion) -> RoutesReply {
+        self.asked.extend_from_slice(queries);
+        let answer = |q: &RouteQuery| match q.fallback_origin {
+            Some(_) => RouteAnswer::ViaFrontier(
+                (0..6)
+                    .map(|i| [q.start[0] + 2.0 * i as f32, q.start[1]])
+                    .collect(),
+            ),
+            None => RouteAnswer::NoRoute {
+                direct: NoRouteReason::EndUnknown,
+                fallback: None,
+            },
+        };
+        RoutesReply::Answered(queries.iter().map(answer).collect())
+    }
+}
+
+#[test]
+fn a_zero_weight_turns_only_that_levels_step_off() {
+    for (alpha, beta) in [(0.0, 0.001), (0.01, 0.0)] {
+        let mut config = config(true);
+        config.asi.si_alpha = alpha;
+        config.asi.si_beta = beta;
+        config.validate().unwrap();
+        let mut l = learner_after(&config, 3);
+        let (high0, low0) = (
+            policy_values(&l, "high_policy"),
+            policy_values(&l, "low_policy"),
+        );
+        let steps = l.train_self_imitation(&mut StraightRoutes::new(6)).unwrap();
+        let s = stats(&l);
+        assert_eq!(steps, 1, "α = {alpha}, β = {beta}: one level step");
+        assert_eq!(
+            (s.high_steps, s.low_steps, s.skipped_disabled, s.skipped()),
+            (u64::from(alpha > 0.0), u64::from(beta > 0.0), 1, 1)
+        );
+        assert_eq!(policy_values(&l, "high_policy") == high0, alpha == 0.0);
+        assert_eq!(policy_values(&l, "low_policy") == low0, beta == 0.0);
+        // The skipped level's batch was still drawn and its routes reported.
+        assert_eq!((s.usable_fraction, s.low_usable_fraction), (1.0, 1.0));
+        assert_eq!(l.si_pending(), 0);
+    }
+}
+
+#[test]
+fn without_the_frontier_fallback_entries_with_no_route_to_their_goal_are_dropped() {
+    // Default: the queries carry φ(s_0) and the frontier routes are imitated.
+    let mut l = learner_after(&config(true), 3);
+    let mut source = UnexploredGoals { asked: Vec::new() };
+    assert_eq!(l.train_self_imitation(&mut source).unwrap(), 2);
+    assert!(source.asked.iter().all(|q| q.fallback_origin.is_some()));
+    assert_eq!(stats(&l).via_frontier_fraction, 1.0);
+
+    let mut config = config(true);
+    config.asi.si_frontier_fallback = false;
+    config.validate().unwrap();
+    let mut l = learner_after(&config, 3);
+    let (high0, low0) = (
+        policy_values(&l, "high_policy"),
+        policy_values(&l, "low_policy"),
+    );
+    let mut source = UnexploredGoals { asked: Vec::new() };
+    assert_eq!(l.train_self_imitation(&mut source).unwrap(), 0);
+    assert_eq!(source.asked.len(), 16, "two batches of 8 were still asked");
+    assert!(source.asked.iter().all(|q| q.fallback_origin.is_none()));
+    let s = stats(&l);
+    assert_eq!(
+        (s.skipped_no_usable_route, s.high_steps, s.low_steps),
+        (2, 0, 0)
+    );
+    assert_eq!((s.usable_fraction, s.via_frontier_fraction), (0.0, 0.0));
+    assert_eq!(policy_values(&l, "high_policy"), high0);
+    assert_eq!(policy_values(&l, "low_policy"), low0);
 }

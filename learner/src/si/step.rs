@@ -8,7 +8,8 @@
 //! buffer entries, each its own Adam step on the level's policy optimiser (the same optimiser as
 //! the level's SAC actor step), not added to the RL losses.
 //!
-//! Skips are counted per level step (a round has two): SI switched off, no answer from the route
+//! Skips are counted per level step (a round has two): SI switched off (or the level's weight
+//! α or β is 0, an ablation of one half of SI), no answer from the route
 //! source, a graph with another φ version, no usable route left, an empty buffer, or a loss that
 //! is NaN or infinite, or whose gradient is (e.g. states so large that the policy or φ overflows
 //! f32; issue #7): then no Adam step is taken, the policy is untouched and the round is done as
@@ -43,6 +44,9 @@ pub struct SiParams {
     pub alpha: f64,
     /// `asi.si_beta` (β, Eq. 12).
     pub beta: f64,
+    /// `asi.si_frontier_fallback`: entries without a route to φ(g̃) imitate a route to a
+    /// frontier (true) or are dropped (false).
+    pub frontier_fallback: bool,
     /// `asi.si_batch_size`, per level step.
     pub batch_size: usize,
     /// `asi.si_k_range`, inclusive.
@@ -62,6 +66,7 @@ impl SiParams {
             start_episode: a.si_start_episode,
             alpha: a.si_alpha,
             beta: a.si_beta,
+            frontier_fallback: a.si_frontier_fallback,
             batch_size: a.si_batch_size,
             k_range: a.si_k_range,
             n_refs: a.si_n_refs,
@@ -73,7 +78,7 @@ impl SiParams {
 /// Why a level step was skipped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SiSkip {
-    /// `asi.self_imitation` is off.
+    /// `asi.self_imitation` is off, or the level's weight (α or β) is 0.
     Disabled,
     /// The route source gave no answer.
     NoAnswer,
@@ -111,7 +116,7 @@ pub struct SiStats {
     pub high_steps: u64,
     /// Low-level Adam steps taken.
     pub low_steps: u64,
-    /// Level steps skipped because SI is off.
+    /// Level steps skipped because SI is off or the level's weight is 0.
     pub skipped_disabled: u64,
     /// Level steps skipped for want of an answer.
     pub skipped_no_answer: u64,
@@ -338,7 +343,8 @@ impl SelfImitation {
             return Ok(Err(SiSkip::EmptyBuffer));
         }
         let sampled = self.embed(&rows, nets)?;
-        let answers = match source.routes(&queries(&sampled), phi_version) {
+        let queries = queries(&sampled, self.params.frontier_fallback);
+        let answers = match source.routes(&queries, phi_version) {
             RoutesReply::Answered(answers) if answers.len() == sampled.n => answers,
             // An answer of the wrong length is unusable: counted as no answer.
             RoutesReply::Answered(_) | RoutesReply::NoAnswer => return Ok(Err(SiSkip::NoAnswer)),
@@ -359,6 +365,15 @@ impl SelfImitation {
         }
         if usable.n == 0 {
             return Ok(Err(SiSkip::NoUsableRoute));
+        }
+        // A zero weight turns the level's step off; the batch and its route figures above are
+        // still drawn and reported, so a run's other levels see the same schedule.
+        let weight = match level {
+            Level::High => self.params.alpha,
+            Level::Low => self.params.beta,
+        };
+        if weight == 0.0 {
+            return Ok(Err(SiSkip::Disabled));
         }
         match level {
             Level::High => self.high_step(&usable, nets, rng),
@@ -557,13 +572,14 @@ pub fn low_action(
     Ok(policy.deterministic(&Tensor::cat(&[base, subgoal], 1)?)?)
 }
 
-/// One route query per sampled row: φ(s_t) → φ(g̃), falling back to a frontier seen from φ(s_0).
-fn queries(sampled: &Sampled) -> Vec<RouteQuery> {
+/// One route query per sampled row: φ(s_t) → φ(g̃), with `fallback` falling back to a frontier
+/// seen from φ(s_0).
+fn queries(sampled: &Sampled, fallback: bool) -> Vec<RouteQuery> {
     (0..sampled.n)
         .map(|i| RouteQuery {
             start: sampled.phi[i],
             end: sampled.phi_goal[i],
-            fallback_origin: Some(sampled.phi_s0[i]),
+            fallback_origin: fallback.then_some(sampled.phi_s0[i]),
         })
         .collect()
 }

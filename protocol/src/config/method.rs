@@ -400,10 +400,18 @@ pub struct AsiConfig {
     pub fr_in_count_window: bool,
     /// SI updates only after this training episode. Default 300. Unit: episodes. Source: code.
     pub si_start_episode: u64,
-    /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code.
+    /// High-level SI weight α (Eq. 11). Default 0.01. Source: paper and code. 0 turns the
+    /// high-level SI step off (no Adam step, counted in `si/skipped_disabled`), so the two
+    /// halves of SI can be ablated apart (an experiment, not in the paper).
     pub si_alpha: f64,
-    /// Low-level SI weight β (Eq. 12). Default 0.001. Source: paper and code.
+    /// Low-level SI weight β (Eq. 12). Default 0.001. Source: paper and code. 0 turns the
+    /// low-level SI step off, as α = 0 the high one.
     pub si_beta: f64,
+    /// When an SI entry has no route to φ(g̃) (its goal's cell is not in the graph, e.g. an
+    /// unexplored far goal), imitate the route to a random frontier seen from φ(s_0) instead.
+    /// Default true (source: code). false is an experiment, not in the paper: such entries are
+    /// dropped from the batch, so the high level is only taught routes toward its own goal.
+    pub si_frontier_fallback: bool,
     /// SI minibatch size (per level). Default 128. Source: supplement and code.
     pub si_batch_size: usize,
     /// Inclusive range of the SI target index k along the route (clamped to its end).
@@ -488,6 +496,7 @@ impl Default for AsiConfig {
             si_start_episode: 300,
             si_alpha: 0.01,
             si_beta: 0.001,
+            si_frontier_fallback: true,
             si_batch_size: 128,
             si_k_range: [3, 5],
             si_n_refs: 3,
