@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """How far the frontier-reaching (FR) episodes of maze runs got, by stretch of training.
 
-    scripts/fr_outcomes.py [--stretches A-B,C-D,...] [--gain] RUN_DIR...
+    scripts/fr_outcomes.py [--stretches A-B,C-D,...] [--gain] [--far-goals] RUN_DIR...
 
 Reads each run's metrics.jsonl (standard library only) and takes one record per finished FR
 episode of actor 0 from the `actor0/actor/fr/last_*` values (docs/METRICS.md): how its
@@ -24,8 +24,19 @@ an FR episode gets") was made with it.
 (`learner/charts/coverage` minus the previous line's, for lines one actor-0 episode apart),
 FR episodes (those where `actor/fr/episodes` grew) and ordinary ones apart, and their ratio:
 how much an FR episode is worth in exploration. Serial runs (one actor) only.
+
+`--far-goals` also prints, per stretch, the far-goal training successes the count schedule
+counted (SPEC §6.4; they set `count_prob`), FR episodes and ordinary ones apart: an episode's
+success is the rise of `learner/schedule/window_far_goal_successes` over the previous line's;
+on the line where a window closed (the counter starts again) it is the closed window's total,
+recovered from the new `count_prob` = 1/(1 + exp(2x − 1)) as x · `count_prob_success_unit`
+(read from the run's config.resolved.toml), minus what the window had counted before. With
+`asi.fr_in_count_window = false` FR episodes are not counted, so their figure is 0. Serial
+runs (one actor) only.
 """
 import json
+import math
+import re
 import statistics
 import sys
 
@@ -98,6 +109,39 @@ def coverage_gains(path):
     return gains
 
 
+def config_value(run, key, default):
+    """A number `key = value` of the run's config.resolved.toml (`default` when absent)."""
+    try:
+        with open(f"{run}/config.resolved.toml") as text:
+            found = re.search(rf"^{key}\s*=\s*([0-9.eE+-]+)\s*$", text.read(), re.MULTILINE)
+    except OSError:
+        return default
+    return float(found.group(1)) if found else default
+
+
+def far_goal_successes(path, unit):
+    """(training episode, was FR, far-goal successes counted: 0 or 1) for each metrics line one
+    training episode after the last. `unit` is the run's `count_prob_success_unit`."""
+    train, window = "learner/schedule/train_episodes", "learner/schedule/window_far_goal_successes"
+    length = "learner/schedule/window_episodes"
+    out, previous = [], None
+    for record in records(path):
+        if record.get(window) is None or record.get(train) is None:
+            continue
+        if previous is not None and record[train] == previous[train] + 1:
+            fr = record.get(PREFIX + "episodes", 0) > previous.get(PREFIX + "episodes", 0)
+            if record.get(length, 0) < previous.get(length, 0):
+                # The window closed with this episode: its total from the new count_prob.
+                p = record["learner/schedule/count_prob"]
+                total = round(unit * (math.log(1.0 / p - 1.0) + 1.0) / 2.0)
+                got = total - previous[window]
+            else:
+                got = record[window] - previous[window]
+            out.append((int(record[train]), fr, int(got)))
+        previous = record
+    return out
+
+
 def mean_gain(values):
     return f"{1e3 * sum(values) / len(values):.2f}e-3 (n={len(values)})" if values else "-"
 
@@ -155,7 +199,7 @@ def options(args, switches, stretches, usage, values=None):
 
 
 def main(args):
-    stretches, given, run_dirs = options(args, {"--gain"}, STRETCHES, __doc__)
+    stretches, given, run_dirs = options(args, {"--gain", "--far-goals"}, STRETCHES, __doc__)
     gain = "--gain" in given
     for run in run_dirs:
         maze = maze_path.for_run(run)
@@ -186,7 +230,20 @@ def main(args):
                 print(f"  {lo}-{hi}: ordinary {median_or_dash(ordinary)}, FR {median_or_dash(fr)}")
         if gain:
             print_gains(coverage_gains(f"{run}/metrics.jsonl"), stretches)
+        if "--far-goals" in given:
+            unit = config_value(run, "count_prob_success_unit", 5.0)
+            print_far_goals(far_goal_successes(f"{run}/metrics.jsonl", unit), stretches)
     return 0
+
+
+def print_far_goals(successes, stretches):
+    """Far-goal successes of FR and of ordinary episodes in each stretch."""
+    print("  far-goal training successes (counted by the count schedule):")
+    for lo, hi in stretches:
+        fr = [n for e, is_fr, n in successes if lo <= e <= hi and is_fr]
+        ordinary = [n for e, is_fr, n in successes if lo <= e <= hi and not is_fr]
+        if fr or ordinary:
+            print(f"  {lo}-{hi}: FR {sum(fr)} of {len(fr)} episodes, ordinary {sum(ordinary)} of {len(ordinary)}")
 
 
 def print_gains(gains, stretches):

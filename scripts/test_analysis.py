@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py, store_reach.py, maze_path.py,
+"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
 count_choice.py) on hand-built inputs.
 
     python3 scripts/test_analysis.py
@@ -8,6 +8,7 @@ Standard library only; .ci/run runs it when python3 is installed. Every expected
 computed by hand in the comments.
 """
 import json
+import math
 import os
 import struct
 import sys
@@ -123,6 +124,44 @@ class CoverageGains(unittest.TestCase):
         for (_, _, got), want in zip(gains, [0.03, 0.01, 0.05]):
             self.assertAlmostEqual(got, want, places=9)
 
+
+
+class FarGoalSuccesses(unittest.TestCase):
+    def test_successes_split_fr_and_ordinary_across_a_window_close(self):
+        # Windows of 3 episodes, success unit 1: count_prob after a window with x successes is
+        # 1/(1 + exp(2x - 1)).
+        p = lambda x: 1.0 / (1.0 + math.exp(2 * x - 1))
+        records = [
+            # (train episode, FR episodes, window episodes, window successes, count_prob)
+            (1, 0, 1, 0, 1.0),
+            (2, 1, 2, 1, 1.0),    # FR, succeeded: 0 -> 1
+            (3, 1, 0, 0, p(2)),   # ordinary, closed the window with 2 successes: 2 - 1 = 1
+            (4, 2, 1, 0, p(2)),   # FR, no success
+            (6, 2, 0, 0, p(0)),   # two episodes after the last: skipped
+            (7, 2, 1, 1, p(0)),   # ordinary, succeeded
+        ]
+        handle = tempfile.NamedTemporaryFile("w", suffix=".jsonl", delete=False)
+        for train, fr, length, successes, count_prob in records:
+            handle.write(json.dumps({
+                "learner/schedule/train_episodes": train,
+                "actor0/actor/fr/episodes": fr,
+                "learner/schedule/window_episodes": length,
+                "learner/schedule/window_far_goal_successes": successes,
+                "learner/schedule/count_prob": count_prob,
+            }) + "\n")
+        handle.close()
+        try:
+            got = fr_outcomes.far_goal_successes(handle.name, 1.0)
+        finally:
+            os.unlink(handle.name)
+        self.assertEqual(got, [(2, True, 1), (3, False, 1), (4, True, 0), (7, False, 1)])
+
+    def test_success_unit_from_the_run_config(self):
+        with tempfile.TemporaryDirectory() as run:
+            self.assertEqual(fr_outcomes.config_value(run, "count_prob_success_unit", 5.0), 5.0)
+            with open(f"{run}/config.resolved.toml", "w") as f:
+                f.write("[exploration]\ncount_prob_interval_episodes = 50\ncount_prob_success_unit = 2.5\n")
+            self.assertEqual(fr_outcomes.config_value(run, "count_prob_success_unit", 5.0), 2.5)
 
 
 class MazePath(unittest.TestCase):
