@@ -366,8 +366,9 @@ impl SelfImitation {
         if usable.n == 0 {
             return Ok(Err(SiSkip::NoUsableRoute));
         }
-        // A zero weight turns the level's step off; the batch and its route figures above are
-        // still drawn and reported, so a run's other levels see the same schedule.
+        // A zero weight turns the level's step off. Only the Adam step is left out: the batch
+        // and its route figures above are still drawn and reported, and a high step that met
+        // another φ version has already kept its round pending.
         let weight = match level {
             Level::High => self.params.alpha,
             Level::Low => self.params.beta,
