@@ -271,18 +271,33 @@ impl RouteSource for UnexploredGoals {
     }
 }
 
+/// The SI-on test config changed by `change`, validated.
+fn si_config_with(change: impl FnOnce(&mut Config)) -> Config {
+    let mut c = config(true);
+    change(&mut c);
+    c.validate().unwrap();
+    c
+}
+
+/// The high and the low policy's weights.
+fn policies(l: &Learner) -> (Vec<u32>, Vec<u32>) {
+    (
+        policy_values(l, "high_policy"),
+        policy_values(l, "low_policy"),
+    )
+}
+
 #[test]
 fn a_zero_weight_turns_only_that_levels_step_off() {
     for (alpha, beta) in [(0.0, 0.001), (0.01, 0.0)] {
-        let mut config = config(true);
-        config.asi.si_alpha = alpha;
-        config.asi.si_beta = beta;
-        config.validate().unwrap();
-        let mut l = learner_after(&config, 3);
-        let (high0, low0) = (
-            policy_values(&l, "high_policy"),
-            policy_values(&l, "low_policy"),
+        let mut l = learner_after(
+            &si_config_with(|c| {
+                c.asi.si_alpha = alpha;
+                c.asi.si_beta = beta;
+            }),
+            3,
         );
+        let (high0, low0) = policies(&l);
         let steps = l.train_self_imitation(&mut StraightRoutes::new(6)).unwrap();
         let s = stats(&l);
         assert_eq!(steps, 1, "α = {alpha}, β = {beta}: one level step");
@@ -290,8 +305,9 @@ fn a_zero_weight_turns_only_that_levels_step_off() {
             (s.high_steps, s.low_steps, s.skipped_disabled, s.skipped()),
             (u64::from(alpha > 0.0), u64::from(beta > 0.0), 1, 1)
         );
-        assert_eq!(policy_values(&l, "high_policy") == high0, alpha == 0.0);
-        assert_eq!(policy_values(&l, "low_policy") == low0, beta == 0.0);
+        let (high, low) = policies(&l);
+        assert_eq!(high == high0, alpha == 0.0);
+        assert_eq!(low == low0, beta == 0.0);
         // The skipped level's batch was still drawn and its routes reported.
         assert_eq!((s.usable_fraction, s.low_usable_fraction), (1.0, 1.0));
         assert_eq!(l.si_pending(), 0);
@@ -307,14 +323,8 @@ fn without_the_frontier_fallback_entries_with_no_route_to_their_goal_are_dropped
     assert!(source.asked.iter().all(|q| q.fallback_origin.is_some()));
     assert_eq!(stats(&l).via_frontier_fraction, 1.0);
 
-    let mut config = config(true);
-    config.asi.si_frontier_fallback = false;
-    config.validate().unwrap();
-    let mut l = learner_after(&config, 3);
-    let (high0, low0) = (
-        policy_values(&l, "high_policy"),
-        policy_values(&l, "low_policy"),
-    );
+    let mut l = learner_after(&si_config_with(|c| c.asi.si_frontier_fallback = false), 3);
+    let (high0, low0) = policies(&l);
     let mut source = UnexploredGoals { asked: Vec::new() };
     assert_eq!(l.train_self_imitation(&mut source).unwrap(), 0);
     assert_eq!(source.asked.len(), 16, "two batches of 8 were still asked");
@@ -325,6 +335,5 @@ fn without_the_frontier_fallback_entries_with_no_route_to_their_goal_are_dropped
         (2, 0, 0)
     );
     assert_eq!((s.usable_fraction, s.via_frontier_fraction), (0.0, 0.0));
-    assert_eq!(policy_values(&l, "high_policy"), high0);
-    assert_eq!(policy_values(&l, "low_policy"), low0);
+    assert_eq!(policies(&l), (high0, low0));
 }
