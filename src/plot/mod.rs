@@ -6,11 +6,14 @@
 //! metric against the x key (default `learner/ingest/env_steps`), lines missing either key
 //! skipped. Arms: a run directory's name with a trailing seed tag removed (`…_seed-3`,
 //! `…-seed3`, `…_s3`), so `u-asi_seed-0` and `u-asi_seed-1` form the arm `u-asi`.
-//! Aggregation: every seed's curve is linearly interpolated onto a common grid from 0 to the
-//! smallest final x among the arm's seeds (no extrapolation), then mean and
-//! `t(0.975, n−1) · sd / √n` per grid point; the drawn band is clipped to [0, 1] when every
-//! value lies in it (rates and fractions cannot leave it), and at 0 from below when every value
-//! is ≥ 0 (distances, counts).
+//! Aggregation: every seed's curve is linearly interpolated onto a common grid (no
+//! extrapolation), then mean and `t(0.975, n−1) · sd / √n` per grid point over the seeds whose
+//! curve reaches it; the drawn band is clipped to [0, 1] when every value lies in it (rates and
+//! fractions cannot leave it), and at 0 from below when every value is ≥ 0 (distances, counts).
+//! The grid runs at one spacing from the latest first x to the smallest final x (every seed
+//! there: solid line) and on to the largest final x when the seeds' lengths differ; that tail
+//! holds only the seeds that got so far, so it is drawn dashed, and the legend and the printed
+//! summary say how many seeds each part holds.
 //!
 //! Also used by the launcher to keep `run_dir/plots/curves.png` current during a run.
 
@@ -26,8 +29,11 @@ use plotters::prelude::*;
 pub const DEFAULT_X: &str = "learner/ingest/env_steps";
 /// Default metrics: test-goal success rate and xy coverage.
 pub const DEFAULT_METRICS: [&str; 2] = ["evaluator0/eval/success_rate", "learner/charts/coverage"];
-/// Points of the common grid an arm's seeds are interpolated onto.
+/// Points of the common grid between an arm's latest first x and its smallest final x.
 const GRID_POINTS: usize = 200;
+/// At most this many more points in the tail past the smallest final x (the spacing widens
+/// beyond it, so one seed much longer than the others does not make a huge grid).
+const TAIL_POINTS_MAX: usize = 4 * GRID_POINTS;
 
 /// One run's curve of one metric.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,12 +49,20 @@ pub struct Band {
     pub mean: Vec<f64>,
     pub half_width: Vec<f64>,
     pub n_seeds: usize,
+    /// Seeds whose curve reaches each grid point: `n_seeds` up to the shortest seed's end, fewer
+    /// in the tail past it.
+    pub n_at: Vec<usize>,
     /// `(0, 1)` when every value of every seed lies in [0, 1] (a rate or fraction: success,
     /// coverage): the drawn band is clipped to it, since the metric cannot leave it.
     pub clip: Option<(f64, f64)>,
 }
 
 impl Band {
+    /// Grid points every seed reaches (the solid part; the points after it are the tail).
+    pub fn common_len(&self) -> usize {
+        self.n_at.iter().take_while(|&&k| k == self.n_seeds).count()
+    }
+
     /// Lower edge of the band at each grid point (clipped to [`Band::clip`]).
     pub fn lower(&self) -> Vec<f64> {
         let lo = self.clip.map_or(f64::NEG_INFINITY, |c| c.0);
@@ -271,32 +285,52 @@ fn value_range(seeds: &[&Series]) -> Option<(f64, f64)> {
 /// Mean and 95 % band of the seeds' curves on a common grid (see the module doc).
 pub fn aggregate(seeds: &[Series]) -> Option<Band> {
     let seeds: Vec<&Series> = seeds.iter().filter(|s| !s.x.is_empty()).collect();
+    let ends = || seeds.iter().map(|s| *s.x.last().expect("non-empty"));
     let start = seeds
         .iter()
         .map(|s| s.x[0])
         .fold(f64::NEG_INFINITY, f64::max);
-    let end = seeds
-        .iter()
-        .map(|s| *s.x.last().expect("non-empty"))
-        .fold(f64::INFINITY, f64::min);
-    if seeds.is_empty() || end < start {
+    let common_end = ends().fold(f64::INFINITY, f64::min);
+    let longest_end = ends().fold(f64::NEG_INFINITY, f64::max);
+    if seeds.is_empty() || common_end < start {
         return None;
     }
-    let n = seeds.len();
-    let steps = if end > start { GRID_POINTS } else { 1 };
+    let mut grid: Vec<f64> = if common_end > start {
+        // The ends exactly, so that every seed reaches the last point of the common part.
+        let last = GRID_POINTS - 1;
+        (0..GRID_POINTS)
+            .map(|k| match k {
+                _ if k == last => common_end,
+                _ => start + (common_end - start) * k as f64 / last as f64,
+            })
+            .collect()
+    } else {
+        vec![start]
+    };
+    if longest_end > common_end {
+        // The tail at the common part's spacing (the whole range's when that part is a point),
+        // widened to at most TAIL_POINTS_MAX points; its last point is the longest seed's end.
+        let spacing = if common_end > start {
+            (common_end - start) / (GRID_POINTS - 1) as f64
+        } else {
+            (longest_end - start) / (GRID_POINTS - 1) as f64
+        };
+        let tail =
+            (((longest_end - common_end) / spacing).ceil() as usize).clamp(1, TAIL_POINTS_MAX);
+        grid.extend((1..=tail).map(|k| match k {
+            _ if k == tail => longest_end,
+            _ => common_end + (longest_end - common_end) * k as f64 / tail as f64,
+        }));
+    }
     let mut band = Band {
-        x: Vec::new(),
-        mean: Vec::new(),
-        half_width: Vec::new(),
-        n_seeds: n,
+        x: Vec::with_capacity(grid.len()),
+        mean: Vec::with_capacity(grid.len()),
+        half_width: Vec::with_capacity(grid.len()),
+        n_seeds: seeds.len(),
+        n_at: Vec::with_capacity(grid.len()),
         clip: value_range(&seeds),
     };
-    for k in 0..steps {
-        let x = if steps == 1 {
-            start
-        } else {
-            start + (end - start) * k as f64 / (steps - 1) as f64
-        };
+    for x in grid {
         let ys: Vec<f64> = seeds.iter().filter_map(|s| interpolate(s, x)).collect();
         let mean = ys.iter().sum::<f64>() / ys.len() as f64;
         let half = if ys.len() > 1 {
@@ -308,6 +342,7 @@ pub fn aggregate(seeds: &[Series]) -> Option<Band> {
         band.x.push(x);
         band.mean.push(mean);
         band.half_width.push(half);
+        band.n_at.push(ys.len());
     }
     Some(band)
 }
@@ -545,29 +580,44 @@ fn draw_panel<'a>(
     )?;
     for &(i, band) in &bands {
         let color = PALETTE[i % PALETTE.len()];
-        if band.n_seeds > 1 {
-            let mut polygon: Vec<(i32, i32)> = band
-                .x
-                .iter()
-                .zip(band.upper())
-                .map(|(x, y)| (px(*x), py(y)))
-                .collect();
-            polygon.extend(
-                band.x
-                    .iter()
-                    .zip(band.lower())
-                    .rev()
-                    .map(|(x, y)| (px(*x), py(y))),
+        // The part every seed reaches, then the tail (fewer seeds) from its last point on.
+        let common = band.common_len();
+        let parts = [(0, common), (common.saturating_sub(1), band.x.len())];
+        for (part, &(from, to)) in parts.iter().enumerate() {
+            if to <= from + usize::from(part == 1) {
+                continue;
+            }
+            let (xs, upper, lower) = (
+                &band.x[from..to],
+                &band.upper()[from..to],
+                &band.lower()[from..to],
             );
-            root.draw(&Polygon::new(polygon, color.mix(0.2).filled()))?;
+            if band.n_at[from..to].iter().any(|&k| k > 1) {
+                let mut polygon: Vec<(i32, i32)> = xs
+                    .iter()
+                    .zip(upper)
+                    .map(|(x, y)| (px(*x), py(*y)))
+                    .collect();
+                polygon.extend(xs.iter().zip(lower).rev().map(|(x, y)| (px(*x), py(*y))));
+                let alpha = if part == 0 { 0.2 } else { 0.1 };
+                root.draw(&Polygon::new(polygon, color.mix(alpha).filled()))?;
+            }
+            let line: Vec<(i32, i32)> = xs
+                .iter()
+                .zip(&band.mean[from..to])
+                .map(|(x, m)| (px(*x), py(*m)))
+                .collect();
+            if part == 0 {
+                root.draw(&PathElement::new(line, color.stroke_width(2)))?;
+            } else {
+                root.draw(&plotters::element::DashedPathElement::new(
+                    line,
+                    8,
+                    6,
+                    color.stroke_width(2),
+                ))?;
+            }
         }
-        let line: Vec<(i32, i32)> = band
-            .x
-            .iter()
-            .zip(&band.mean)
-            .map(|(x, m)| (px(*x), py(*m)))
-            .collect();
-        root.draw(&PathElement::new(line, color.stroke_width(2)))?;
     }
     // Legend, top left inside the panel.
     for (row, &(i, band)) in bands.iter().enumerate() {
@@ -577,7 +627,13 @@ fn draw_panel<'a>(
             [(left + 10, y), (left + 30, y + 12)],
             color.filled(),
         ))?;
-        let label = format!("{} (n={})", figure.arms[i].0, band.n_seeds);
+        let label = match band.n_at.last() {
+            Some(&k) if k < band.n_seeds => format!(
+                "{} (n={}, dashed: {k} at the end)",
+                figure.arms[i].0, band.n_seeds
+            ),
+            _ => format!("{} (n={})", figure.arms[i].0, band.n_seeds),
+        };
         text(root, &label, left + 38, y, 2, &TEXT)?;
     }
     Ok(())
@@ -593,16 +649,29 @@ pub fn run(args: &crate::cli::PlotArgs) -> anyhow::Result<()> {
     let figure = build_figure(&args.run_dirs, &args.x, &metrics)?;
     for (arm, bands) in &figure.arms {
         for (metric, band) in metrics.iter().zip(bands) {
-            match band {
-                Some(b) => println!(
-                    "{arm}: {metric}: {} seed(s), final mean {:.4} ± {:.4} at x = {}",
-                    b.n_seeds,
-                    b.mean.last().copied().unwrap_or(f64::NAN),
-                    b.half_width.last().copied().unwrap_or(f64::NAN),
-                    format_tick(b.x.last().copied().unwrap_or(0.0)),
-                ),
-                None => println!("{arm}: {metric}: no data"),
+            let Some(b) = band else {
+                println!("{arm}: {metric}: no data");
+                continue;
+            };
+            // The common part's end: the last point every seed reaches.
+            let c = b.common_len().max(1) - 1;
+            print!(
+                "{arm}: {metric}: {} seed(s), mean {:.4} ± {:.4} at x = {}",
+                b.n_seeds,
+                b.mean[c],
+                b.half_width[c],
+                format_tick(b.x[c]),
+            );
+            let last = b.x.len() - 1;
+            if last > c {
+                print!(
+                    " (the shortest seed's end); {} seed(s) on to x = {}, mean there {:.4}",
+                    b.n_at[last],
+                    format_tick(b.x[last]),
+                    b.mean[last],
+                );
             }
+            println!();
         }
     }
     render_png(&figure, &args.out)?;
@@ -728,18 +797,63 @@ mod tests {
         ];
         let band = aggregate(&seeds).unwrap();
         assert_eq!(band.n_seeds, 3);
-        assert_eq!(
-            *band.x.last().unwrap(),
-            10.0,
-            "grid ends at the shortest run"
-        );
-        assert!((band.mean.last().unwrap() - 2.0).abs() < 1e-12);
-        assert!((band.half_width.last().unwrap() - 4.303 / 3f64.sqrt()).abs() < 1e-9);
+        let c = band.common_len();
+        assert_eq!(c, GRID_POINTS, "the common part has the full grid");
+        assert_eq!(band.x[c - 1], 10.0, "every seed to the shortest run's end");
+        assert!((band.mean[c - 1] - 2.0).abs() < 1e-12);
+        assert!((band.half_width[c - 1] - 4.303 / 3f64.sqrt()).abs() < 1e-9);
+        // The tail to x = 20 holds the one longer seed (y = 0.2·x): its values, no band.
+        assert_eq!(*band.x.last().unwrap(), 20.0);
+        assert!(band.n_at[c..].iter().all(|&k| k == 1));
+        assert!(band.half_width[c..].iter().all(|&h| h == 0.0));
+        for (x, m) in band.x[c..].iter().zip(&band.mean[c..]) {
+            assert!((m - 0.2 * x).abs() < 1e-9, "{x}: {m}");
+        }
         // Midpoint x = 5 (grid point 100 of 200 is not exactly 5; interpolate by hand instead).
         let k = band.x.iter().position(|x| *x > 4.9).unwrap();
         let x = band.x[k];
         assert!((band.mean[k] - (0.1 * x + 0.2 * x + 0.3 * x) / 3.0).abs() < 1e-9);
         assert_eq!(band.half_width[0], 0.0, "all seeds agree at x = 0");
+    }
+
+    #[test]
+    fn seeds_of_different_lengths_give_a_tail_with_the_seeds_that_reach_it() {
+        // Three seeds to x = 10 (values 1, 3, 5 there: mean 3, sd 2), two of them on to 20
+        // (values 2 and 6: mean 4, sd 2√2, half-width t(1) · 2√2 / √2 = 2 · 12.706).
+        let seeds = [
+            series(&[(0.0, 0.0), (10.0, 1.0), (20.0, 2.0)]),
+            series(&[(0.0, 0.0), (10.0, 3.0), (20.0, 6.0)]),
+            series(&[(0.0, 0.0), (10.0, 5.0)]),
+        ];
+        let band = aggregate(&seeds).unwrap();
+        let c = band.common_len();
+        assert_eq!((band.n_seeds, c), (3, GRID_POINTS));
+        assert_eq!(band.x[c - 1], 10.0);
+        assert!((band.mean[c - 1] - 3.0).abs() < 1e-12);
+        assert!((band.half_width[c - 1] - 4.303 * 2.0 / 3f64.sqrt()).abs() < 1e-9);
+        let last = band.x.len() - 1;
+        assert_eq!((band.x[last], band.n_at[last]), (20.0, 2));
+        assert!((band.mean[last] - 4.0).abs() < 1e-12);
+        assert!((band.half_width[last] - 2.0 * 12.706).abs() < 1e-9);
+        // The tail keeps the common part's spacing and rises strictly.
+        let spacing = 10.0 / (GRID_POINTS - 1) as f64;
+        for w in band.x[c - 1..].windows(2) {
+            assert!(
+                w[1] > w[0] && w[1] - w[0] <= spacing * (1.0 + 1e-9),
+                "{w:?}"
+            );
+        }
+        // A seed far longer than the others: the tail's points are capped.
+        let wide = aggregate(&[
+            series(&[(0.0, 0.0), (1.0, 1.0)]),
+            series(&[(0.0, 0.0), (1000.0, 1.0)]),
+        ])
+        .unwrap();
+        assert_eq!(wide.x.len(), GRID_POINTS + TAIL_POINTS_MAX);
+        assert_eq!(
+            (*wide.x.last().unwrap(), wide.common_len()),
+            (1000.0, GRID_POINTS)
+        );
     }
 
     #[test]
@@ -839,7 +953,8 @@ mod tests {
         let runs: Vec<PathBuf> = (0..2).map(|s| dir.join(format!("arm_seed-{s}"))).collect();
         for (s, run) in runs.iter().enumerate() {
             std::fs::create_dir_all(run).unwrap();
-            let lines: String = (0..20)
+            // Seed 1 runs on past seed 0's end (x = 1,900) to x = 2,300: a dashed tail.
+            let lines: String = (0..20 + 4 * s)
                 .map(|k| {
                     format!(
                         "{{\"x\":{},\"m\":{}}}\n",
@@ -856,8 +971,34 @@ mod tests {
         assert!(figure.arms[0].1[1].is_none());
         let out = dir.join("plot.png");
         render_png(&figure, &out).unwrap();
-        let bytes = std::fs::read(&out).unwrap();
-        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+        let file = std::fs::File::open(&out).unwrap();
+        let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+            .read_info()
+            .unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size()];
+        let info = reader.next_frame(&mut pixels).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
+        // The arm's line colour in the first panel's plot area, per column: present both left
+        // and right of the common end (x = 1,900 of 0–2,300), and with gaps right of it (dashed).
+        let width = info.width as usize;
+        let arm = [PALETTE[0].0, PALETTE[0].1, PALETTE[0].2];
+        let rows = (MARGIN_T + 1) as usize..(PANEL_H as i32 - MARGIN_B) as usize;
+        let drawn = |col: usize| {
+            rows.clone()
+                .any(|r| pixels[3 * (r * width + col)..][..3] == arm)
+        };
+        let plot_w = f64::from(PANEL_W as i32 - MARGIN_R - MARGIN_L);
+        let end_col = MARGIN_L as usize + (1900.0 / 2300.0 * plot_w) as usize;
+        let right = (PANEL_W as i32 - MARGIN_R) as usize;
+        assert!(
+            (MARGIN_L as usize + 5..end_col - 5).all(drawn),
+            "solid part"
+        );
+        let tail: Vec<bool> = (end_col + 5..right - 2).map(drawn).collect();
+        assert!(
+            tail.iter().filter(|&&d| d).count() > tail.len() / 3,
+            "tail drawn"
+        );
+        assert!(tail.iter().any(|&d| !d), "tail dashed");
     }
 }
