@@ -219,17 +219,9 @@ mod tests {
             graph.nodes.len(),
             clock.elapsed().as_secs_f64()
         );
-        let file = std::fs::File::open(&path).unwrap();
-        let mut reader = png::Decoder::new(std::io::BufReader::new(file))
-            .read_info()
-            .unwrap();
-        let mut pixels = vec![0; reader.output_buffer_size()];
-        let info = reader.next_frame(&mut pixels).unwrap();
+        let (width, height, pixels) = crate::plot::read_rgb_png(&path);
         std::fs::remove_file(&path).unwrap();
-        assert_eq!(
-            (info.width, info.height),
-            PixelMap::new(maze.world_bounds()).size()
-        );
+        assert_eq!((width, height), PixelMap::new(maze.world_bounds()).size());
         // The route colour is in the picture (RGB rows, no alpha).
         let red = [ROUTE_COLOR.0, ROUTE_COLOR.1, ROUTE_COLOR.2];
         assert!(

@@ -679,6 +679,19 @@ pub fn run(args: &crate::cli::PlotArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// (tests) Width, height and RGB bytes (rows, no alpha) of a PNG the plotters bitmap encoder
+/// wrote.
+#[cfg(test)]
+pub(crate) fn read_rgb_png(path: &Path) -> (u32, u32, Vec<u8>) {
+    let file = std::fs::File::open(path).expect("open the PNG");
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .expect("a PNG header");
+    let mut pixels = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut pixels).expect("a PNG frame");
+    (info.width, info.height, pixels)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -971,16 +984,11 @@ mod tests {
         assert!(figure.arms[0].1[1].is_none());
         let out = dir.join("plot.png");
         render_png(&figure, &out).unwrap();
-        let file = std::fs::File::open(&out).unwrap();
-        let mut reader = png::Decoder::new(std::io::BufReader::new(file))
-            .read_info()
-            .unwrap();
-        let mut pixels = vec![0; reader.output_buffer_size()];
-        let info = reader.next_frame(&mut pixels).unwrap();
+        let (width, _, pixels) = read_rgb_png(&out);
         std::fs::remove_dir_all(&dir).unwrap();
         // The arm's line colour in the first panel's plot area, per column: present both left
         // and right of the common end (x = 1,900 of 0–2,300), and with gaps right of it (dashed).
-        let width = info.width as usize;
+        let width = width as usize;
         let arm = [PALETTE[0].0, PALETTE[0].1, PALETTE[0].2];
         let rows = (MARGIN_T + 1) as usize..(PANEL_H as i32 - MARGIN_B) as usize;
         let drawn = |col: usize| {
