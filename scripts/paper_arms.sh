@@ -25,7 +25,10 @@
 # arms run at once, NICE (19) their priority, CKPT_MINS (10) minutes between checkpoints
 # (run.checkpoint_interval_mins; they do not change the results). Re-running resumes every
 # unfinished stage; a stage killed before its first checkpoint starts over (`--restart`: its
-# folder is moved aside to <dir>.old-<secs>, nothing is deleted).
+# folder is moved aside to <dir>.old-<secs>, nothing is deleted). The asi and asi-no-fr arms
+# go on in their branch's folder, so an arm forked from a branch (asi-no-si from asi, hess from
+# asi-no-fr) must be asked for before that branch runs on: once it has, the script stops with
+# a message instead of copying the wrong episode.
 # Curves: asi plot OUT_DIR/asi_s* OUT_DIR/hess_s* ... (the _sN suffix is the seed tag).
 set -euo pipefail
 
@@ -106,9 +109,20 @@ run() {
     echo "$(date -u +%T) $(basename "$dir"): done"
 }
 
-# fork FROM TO: copies a finished prefix, unless TO exists already (then it is resumed).
+# fork FROM TO AT: copies the prefix in FROM, which must be at episode AT, unless TO exists
+# already (then it is resumed). The asi and asi-no-fr arms go on in their branch's folder, so a
+# branch that has run on as an arm is past its fork point and cannot be forked any more (a
+# copy of it would be that arm, not the new one).
 fork() {
     if [[ ! -e $2 ]]; then
+        local at
+        at=$(done_episodes "$1")
+        if (( at != $3 )); then
+            echo "cannot fork $(basename "$2") from $(basename "$1"): that run is at episode" \
+                "$at, not at the fork point $3 (it went on as an arm); run every arm of a seed" \
+                "in one call, or fork by hand from a copy kept at episode $3" >&2
+            exit 1
+        fi
         cp -a "$1" "$2"
         cp "$1.log" "$2.log"
     fi
@@ -117,15 +131,15 @@ fork() {
 trunk=$out/trunk_s$seed fr_on=$out/asi_s$seed fr_off=$out/asi-no-fr_s$seed
 run "$trunk" asi-no-fr "$fr_start"
 
-fork "$trunk" "$fr_on"
-fork "$trunk" "$fr_off"
+fork "$trunk" "$fr_on" "$fr_start"
+fork "$trunk" "$fr_off" "$fr_start"
 # Both branches to SI_START.
 run "$fr_on" asi "$si_start" &
 run "$fr_off" asi-no-fr "$si_start" &
 wait
 
-[[ " ${arms[*]} " == *" asi-no-si "* ]] && fork "$fr_on" "$out/asi-no-si_s$seed"
-[[ " ${arms[*]} " == *" hess "* ]] && fork "$fr_off" "$out/hess_s$seed"
+if [[ " ${arms[*]} " == *" asi-no-si "* ]]; then fork "$fr_on" "$out/asi-no-si_s$seed" "$si_start"; fi
+if [[ " ${arms[*]} " == *" hess "* ]]; then fork "$fr_off" "$out/hess_s$seed" "$si_start"; fi
 # The arms to EPISODES, JOBS at a time.
 for arm in "${arms[@]}"; do
     while (( $(jobs -rp | wc -l) >= jobs )); do wait -n; done

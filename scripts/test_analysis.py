@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Tests of the analysis scripts (fr_trace.py, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
-count_choice.py) on hand-built inputs.
+count_choice.py) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
 
     python3 scripts/test_analysis.py
 
@@ -11,6 +11,7 @@ import json
 import math
 import os
 import struct
+import subprocess
 import sys
 import tempfile
 import unittest
@@ -386,6 +387,87 @@ class CountChoice(unittest.TestCase):
         # Draw 0 is the start itself (distance 0) and draw 1 is beyond 20: neither qualifies.
         self.assertEqual(count_choice.choose((0.0, 0.0), [0, 1, 2, 3], latents, score), 3)
         self.assertEqual(count_choice.choose((0.0, 0.0), [1, 0], latents, score), 1)
+
+
+# Stand-in for `asi train --serial` as paper_arms.sh calls it (ASI_BIN): resumes at the run
+# folder's last episode and writes one metrics line per episode up to run.max_episodes with the
+# two switches it ran under, so a test can read which switches each episode of an arm had.
+FAKE_ASI = r"""#!/usr/bin/env python3
+import json, os, sys
+args = sys.argv[1:]
+assert args[:2] == ["train", "--serial"], args
+run_dir = args[args.index("--run-dir") + 1]
+sets = dict(args[i + 1].split("=", 1) for i, a in enumerate(args) if a == "--set")
+fr = sets.get("asi.frontier_reaching", "true") == "true"
+si = sets.get("asi.self_imitation", "true") == "true"
+os.makedirs(os.path.join(run_dir, "checkpoints", "serial"), exist_ok=True)
+path = os.path.join(run_dir, "metrics.jsonl")
+done = 0
+if os.path.exists(path):
+    for line in open(path):
+        done = json.loads(line)["learner/schedule/train_episodes"]
+with open(path, "a") as out:
+    for episode in range(done + 1, int(sets["run.max_episodes"]) + 1):
+        out.write(json.dumps({"learner/schedule/train_episodes": episode, "fr": fr, "si": si}) + "\n")
+"""
+
+
+class PaperArms(unittest.TestCase):
+    """scripts/paper_arms.sh with FR_START 20, SI_START 30, 40 episodes and a stand-in binary."""
+
+    def setUp(self):
+        self.dir = tempfile.TemporaryDirectory()
+        self.bin = os.path.join(self.dir.name, "fake-asi")
+        with open(self.bin, "w") as f:
+            f.write(FAKE_ASI)
+        os.chmod(self.bin, 0o755)
+        self.out = os.path.join(self.dir.name, "runs")
+
+    def tearDown(self):
+        self.dir.cleanup()
+
+    def arms(self, arms):
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_arms.sh")
+        env = dict(os.environ, ARMS=arms, ASI_BIN=self.bin, FR_START="20", SI_START="30", NICE="0")
+        return subprocess.run(["bash", script, "config.toml", "0", "40", self.out], env=env,
+                              capture_output=True, text=True, timeout=120)
+
+    def switches(self, arm):
+        """Runs of (first episode, last episode, FR on, SI on) in the arm's metrics."""
+        runs = []
+        with open(os.path.join(self.out, f"{arm}_s0", "metrics.jsonl")) as lines:
+            for line in lines:
+                m = json.loads(line)
+                key = (m["fr"], m["si"])
+                if runs and runs[-1][2:] == key and runs[-1][1] + 1 == m["learner/schedule/train_episodes"]:
+                    runs[-1] = (runs[-1][0], runs[-1][1] + 1) + key
+                else:
+                    runs.append((m["learner/schedule/train_episodes"],) * 2 + key)
+        return runs
+
+    def test_each_arm_is_forked_at_its_switch(self):
+        done = self.arms("asi asi-no-fr asi-no-si hess")
+        self.assertEqual(done.returncode, 0, done.stderr)
+        # The trunk runs FR off (SI on: it cannot act before SI_START), the branches from 20,
+        # the arms from 30.
+        trunk = (1, 20, False, True)
+        self.assertEqual(self.switches("asi"), [trunk, (21, 40, True, True)])
+        self.assertEqual(self.switches("asi-no-fr"), [(1, 40, False, True)])
+        self.assertEqual(self.switches("asi-no-si"), [trunk, (21, 30, True, True), (31, 40, True, False)])
+        self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
+
+    def test_an_arm_is_not_forked_from_a_branch_that_ran_on(self):
+        done = self.arms("asi")
+        self.assertEqual(done.returncode, 0, done.stderr)
+        # asi_s0 is at 40 now: asi-no-si cannot be forked from it at 30 any more.
+        late = self.arms("asi-no-si")
+        self.assertNotEqual(late.returncode, 0)
+        self.assertIn("cannot fork asi-no-si_s0 from asi_s0: that run is at episode 40, not at "
+                      "the fork point 30", " ".join(late.stderr.split()))
+        self.assertFalse(os.path.exists(os.path.join(self.out, "asi-no-si_s0")))
+        # hess from the FR-off branch, still at 30, is fine.
+        self.assertEqual(self.arms("hess").returncode, 0)
+        self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
 
 
 class Options(unittest.TestCase):
