@@ -20,8 +20,9 @@
 #
 # Environment: ARMS (default "asi asi-no-fr asi-no-si hess": the arms run to EPISODES; e.g.
 # ARMS="asi hess" leaves the ablations at their fork points), ASI_BIN (default
-# target/release/asi, built if missing), FR_START (200) and
-# SI_START (300) must equal the config's asi.fr_start_episode / asi.si_start_episode, JOBS (2)
+# target/release/asi, built if missing), FR_START and SI_START (default: the config's
+# asi.fr_start_episode / asi.si_start_episode, 200 and 300 where it sets none; set by hand
+# they must equal them, or the script stops before running anything), JOBS (2)
 # arms run at once, NICE (19) their priority, CKPT_MINS (10) minutes between checkpoints
 # (run.checkpoint_interval_mins; they do not change the results). Re-running resumes every
 # unfinished stage; a stage killed before its first checkpoint starts over (`--restart`: its
@@ -33,12 +34,35 @@
 set -euo pipefail
 
 if [[ $# -ne 4 ]]; then
-    sed -n '2,20p' "$0" >&2
+    sed -n '2,/^set -e/{/^#/p}' "$0" >&2
     exit 2
 fi
 config=$1 seed=$2 episodes=$3 out=$4
-fr_start=${FR_START:-200}
-si_start=${SI_START:-300}
+if [[ ! -f $config ]]; then
+    echo "no config file '$config'" >&2
+    exit 2
+fi
+# config_value KEY DEFAULT: the integer the config gives KEY (these keys exist only in [asi]),
+# or DEFAULT (the binary's default) when it does not set it.
+config_value() {
+    python3 - "$config" "$1" "$2" <<'EOF'
+import re
+import sys
+text = open(sys.argv[1]).read()
+found = re.search(rf"^\s*{sys.argv[2]}\s*=\s*([0-9]+)\s*(#.*)?$", text, re.MULTILINE)
+print(found.group(1) if found else sys.argv[3])
+EOF
+}
+config_fr=$(config_value fr_start_episode 200)
+config_si=$(config_value si_start_episode 300)
+fr_start=${FR_START:-$config_fr}
+si_start=${SI_START:-$config_si}
+if (( fr_start != config_fr || si_start != config_si )); then
+    echo "FR_START=$fr_start SI_START=$si_start, but $config has asi.fr_start_episode =" \
+        "$config_fr and asi.si_start_episode = $config_si: the forks must sit where FR and" \
+        "SI start (leave FR_START and SI_START unset to take the config's)" >&2
+    exit 2
+fi
 jobs=${JOBS:-2}
 nice_level=${NICE:-19}
 ckpt_mins=${CKPT_MINS:-10}

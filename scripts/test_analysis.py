@@ -422,14 +422,20 @@ class PaperArms(unittest.TestCase):
             f.write(FAKE_ASI)
         os.chmod(self.bin, 0o755)
         self.out = os.path.join(self.dir.name, "runs")
+        # The fork points come from the config (FR_START / SI_START unset).
+        self.config = os.path.join(self.dir.name, "config.toml")
+        with open(self.config, "w") as f:
+            f.write("[asi]\nfr_start_episode = 20  # FR from here\n# si_start_episode = 99\n"
+                    "si_start_episode = 30\n")
 
     def tearDown(self):
         self.dir.cleanup()
 
-    def arms(self, arms):
+    def arms(self, arms, **fork_points):
         script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_arms.sh")
-        env = dict(os.environ, ARMS=arms, ASI_BIN=self.bin, FR_START="20", SI_START="30", NICE="0")
-        return subprocess.run(["bash", script, "config.toml", "0", "40", self.out], env=env,
+        env = {k: v for k, v in os.environ.items() if k not in ("FR_START", "SI_START")}
+        env.update(ARMS=arms, ASI_BIN=self.bin, NICE="0", **fork_points)
+        return subprocess.run(["bash", script, self.config, "0", "40", self.out], env=env,
                               capture_output=True, text=True, timeout=120)
 
     def switches(self, arm):
@@ -468,6 +474,15 @@ class PaperArms(unittest.TestCase):
         # hess from the FR-off branch, still at 30, is fine.
         self.assertEqual(self.arms("hess").returncode, 0)
         self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
+
+    def test_fork_points_other_than_the_configs_are_refused(self):
+        done = self.arms("asi", FR_START="20", SI_START="25")
+        self.assertEqual(done.returncode, 2)
+        self.assertIn("asi.fr_start_episode = 20 and asi.si_start_episode = 30",
+                      " ".join(done.stderr.split()))
+        self.assertFalse(os.path.exists(self.out), "nothing ran")
+        # Given by hand and equal to the config's, they are accepted.
+        self.assertEqual(self.arms("asi", FR_START="20", SI_START="30").returncode, 0)
 
 
 class Options(unittest.TestCase):
