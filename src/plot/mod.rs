@@ -285,7 +285,12 @@ fn value_range(seeds: &[&Series]) -> Option<(f64, f64)> {
 /// Mean and 95 % band of the seeds' curves on a common grid (see the module doc).
 pub fn aggregate(seeds: &[Series]) -> Option<Band> {
     let seeds: Vec<&Series> = seeds.iter().filter(|s| !s.x.is_empty()).collect();
-    let ends = || seeds.iter().map(|s| *s.x.last().expect("non-empty"));
+    // Invariant: every series left has a point (the filter above), so `last` is `Some`.
+    let ends = || {
+        seeds
+            .iter()
+            .map(|s| *s.x.last().expect("empty series filtered out"))
+    };
     let start = seeds
         .iter()
         .map(|s| s.x[0])
@@ -581,16 +586,19 @@ fn draw_panel<'a>(
     for &(i, band) in &bands {
         let color = PALETTE[i % PALETTE.len()];
         // The part every seed reaches, then the tail (fewer seeds) from its last point on.
-        let common = band.common_len();
-        let parts = [(0, common), (common.saturating_sub(1), band.x.len())];
+        // Both parts share the tail's first point, so the line has no gap (common ≥ 1: every
+        // seed reaches the first grid point).
+        let (common, len) = (band.common_len(), band.x.len());
+        let mut parts = vec![(0, common)];
+        if common < len {
+            parts.push((common - 1, len));
+        }
+        let (band_upper, band_lower) = (band.upper(), band.lower());
         for (part, &(from, to)) in parts.iter().enumerate() {
-            if to <= from + usize::from(part == 1) {
-                continue;
-            }
             let (xs, upper, lower) = (
                 &band.x[from..to],
-                &band.upper()[from..to],
-                &band.lower()[from..to],
+                &band_upper[from..to],
+                &band_lower[from..to],
             );
             if band.n_at[from..to].iter().any(|&k| k > 1) {
                 let mut polygon: Vec<(i32, i32)> = xs
