@@ -13,7 +13,8 @@
 //! The grid runs at one spacing from the latest first x to the smallest final x (every seed
 //! there: solid line) and on to the largest final x when the seeds' lengths differ; that tail
 //! holds only the seeds that got so far, so it is drawn dashed, and the legend and the printed
-//! summary say how many seeds each part holds.
+//! summary say how many seeds each part holds. Each panel's legend goes in the corner of the plot
+//! area where it hides the least of the curves and bands ([`legend_origin`]).
 //!
 //! Also used by the launcher to keep `run_dir/plots/curves.png` current during a run.
 
@@ -583,6 +584,7 @@ fn draw_panel<'a>(
         2,
         &TEXT,
     )?;
+    let mut columns = Vec::new();
     for &(i, band) in &bands {
         let color = PALETTE[i % PALETTE.len()];
         // The part every seed reaches, then the tail (fewer seeds) from its last point on.
@@ -594,6 +596,19 @@ fn draw_panel<'a>(
             parts.push((common - 1, len));
         }
         let (band_upper, band_lower) = (band.upper(), band.lower());
+        // Where this arm is drawn, for the legend's placement.
+        columns.extend((0..len).map(|j| {
+            let line = py(band.mean[j]);
+            Column {
+                x: px(band.x[j]),
+                line,
+                band: if band.n_at[j] > 1 {
+                    (py(band_upper[j]), py(band_lower[j]))
+                } else {
+                    (line, line)
+                },
+            }
+        }));
         for (part, &(from, to)) in parts.iter().enumerate() {
             let (xs, upper, lower) = (
                 &band.x[from..to],
@@ -627,24 +642,102 @@ fn draw_panel<'a>(
             }
         }
     }
-    // Legend, top left inside the panel.
-    for (row, &(i, band)) in bands.iter().enumerate() {
-        let color = PALETTE[i % PALETTE.len()];
-        let y = upper + 10 + row as i32 * 20;
-        root.draw(&Rectangle::new(
-            [(left + 10, y), (left + 30, y + 12)],
-            color.filled(),
-        ))?;
-        let label = match band.n_at.last() {
+    // Legend: in the corner of the plot area where it hides the least of the curves, on a
+    // light background so what it still covers stays visible.
+    let labels: Vec<String> = bands
+        .iter()
+        .map(|&(i, band)| match band.n_at.last() {
             Some(&k) if k < band.n_seeds => format!(
                 "{} (n={}, dashed: {k} at the end)",
                 figure.arms[i].0, band.n_seeds
             ),
             _ => format!("{} (n={})", figure.arms[i].0, band.n_seeds),
-        };
-        text(root, &label, left + 38, y, 2, &TEXT)?;
+        })
+        .collect();
+    let text_w = labels.iter().map(|l| 2 * font::text_width(l) as i32).max();
+    let size = (
+        LEGEND_TEXT_X + text_w.unwrap_or(0) + LEGEND_PAD,
+        2 * LEGEND_PAD - 6 + LEGEND_ROW * labels.len() as i32,
+    );
+    let (x0, y0) = legend_origin([left, upper, right, lower], size, &columns);
+    root.draw(&Rectangle::new(
+        [(x0, y0), (x0 + size.0, y0 + size.1)],
+        WHITE.mix(0.85).filled(),
+    ))?;
+    root.draw(&Rectangle::new(
+        [(x0, y0), (x0 + size.0, y0 + size.1)],
+        GRID,
+    ))?;
+    for (row, (&(i, _), label)) in bands.iter().zip(&labels).enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let y = y0 + LEGEND_PAD + row as i32 * LEGEND_ROW;
+        root.draw(&Rectangle::new(
+            [(x0 + LEGEND_PAD, y), (x0 + LEGEND_PAD + 20, y + 12)],
+            color.filled(),
+        ))?;
+        text(root, label, x0 + LEGEND_TEXT_X, y, 2, &TEXT)?;
     }
     Ok(())
+}
+
+/// Legend box layout (device pixels): padding inside the box, height of one row, the label's
+/// offset from the box's left edge (after the colour swatch), and the gap to the plot frame.
+const LEGEND_PAD: i32 = 8;
+const LEGEND_ROW: i32 = 20;
+const LEGEND_TEXT_X: i32 = LEGEND_PAD + 28;
+const LEGEND_INSET: i32 = 4;
+/// What hiding one grid point of a mean line costs, in pixels of band height hidden.
+const LEGEND_LINE_WEIGHT: i32 = 20;
+
+/// One grid point of an arm as drawn: its column, the mean line's row and the band's rows
+/// (top, bottom; both the line's row where the arm has no band).
+#[derive(Debug, Clone, Copy)]
+struct Column {
+    x: i32,
+    line: i32,
+    band: (i32, i32),
+}
+
+/// The legend box's top-left corner: of the four corners of the plot area `[left, upper,
+/// right, lower]` (the box `LEGEND_INSET` inside the frame), the one where a box of `size`
+/// hides the least of the curves: each mean-line point inside it costs
+/// `LEGEND_LINE_WEIGHT`, each band the height of its part inside it, the box counted
+/// `LEGEND_INSET` larger on every side so that it does not end flush against a curve. Ties go
+/// to the first of top left, top right, bottom right, bottom left.
+fn legend_origin(area: [i32; 4], size: (i32, i32), columns: &[Column]) -> (i32, i32) {
+    let [left, upper, right, lower] = area;
+    let (w, h) = size;
+    let corners = [
+        (left + LEGEND_INSET, upper + LEGEND_INSET),
+        (right - LEGEND_INSET - w, upper + LEGEND_INSET),
+        (right - LEGEND_INSET - w, lower - LEGEND_INSET - h),
+        (left + LEGEND_INSET, lower - LEGEND_INSET - h),
+    ];
+    let m = LEGEND_INSET;
+    let cost = |(x0, y0): (i32, i32)| -> i64 {
+        let (top, bottom) = (y0 - m, y0 + h + m);
+        columns
+            .iter()
+            .filter(|c| (x0 - m..=x0 + w + m).contains(&c.x))
+            .map(|c| {
+                let line = if (top..=bottom).contains(&c.line) {
+                    LEGEND_LINE_WEIGHT
+                } else {
+                    0
+                };
+                let band = (c.band.1.min(bottom) - c.band.0.max(top)).max(0);
+                i64::from(line + band)
+            })
+            .sum()
+    };
+    let mut best = (corners[0], cost(corners[0]));
+    for &corner in &corners[1..] {
+        let c = cost(corner);
+        if c < best.1 {
+            best = (corner, c);
+        }
+    }
+    best.0
 }
 
 /// `asi plot`: reads the runs, aggregates, draws `out`; prints what it plotted.
@@ -1016,5 +1109,85 @@ mod tests {
             "tail drawn"
         );
         assert!(tail.iter().any(|&d| !d), "tail dashed");
+    }
+
+    #[test]
+    fn the_legend_takes_the_corner_that_hides_the_least() {
+        let column = |x, line, band| Column { x, line, band };
+        let (area, size) = ([0, 0, 400, 300], (100, 50));
+        // The four boxes: x 4..104 or 296..396, y 4..54 or 246..296; counted 4 px larger
+        // (x 0..108 or 292..400, y 0..58 or 242..300).
+        assert_eq!(
+            legend_origin(area, size, &[]),
+            (4, 4),
+            "ties go to the top left"
+        );
+        // Top left: three band columns with 28 px inside the counted box (cost 84); top right:
+        // five line points (5 · 20 = 100); each bottom corner ten line points (200).
+        let mut columns: Vec<Column> = (1..4).map(|k| column(10 * k, 200, (30, 154))).collect();
+        columns.extend((0..5).map(|k| column(300 + 10 * k, 10, (10, 10))));
+        for x0 in [10, 300] {
+            columns.extend((0..10).map(|k| column(x0 + 5 * k, 270, (270, 270))));
+        }
+        assert_eq!(legend_origin(area, size, &columns), (4, 4));
+        // One more band column at the top left (112) tips it to the top right.
+        columns.push(column(40, 200, (30, 154)));
+        assert_eq!(legend_origin(area, size, &columns), (296, 4));
+        // So does a line point outside the box but within its margin (84 + 20 > 100).
+        columns.pop();
+        columns.push(column(106, 56, (56, 56)));
+        assert_eq!(legend_origin(area, size, &columns), (296, 4));
+        // A falling line leaves the top right and the bottom left free: the top right first.
+        let falling: Vec<Column> = (0..=40)
+            .map(|k| column(10 * k, 300 - 300 * (40 - k) / 40, (0, 0)))
+            .map(|c| Column {
+                band: (c.line, c.line),
+                ..c
+            })
+            .collect();
+        assert_eq!(legend_origin(area, size, &falling), (296, 4));
+        // A line along the top: the bottom right.
+        let high: Vec<Column> = (0..=40).map(|k| column(10 * k, 20, (20, 20))).collect();
+        assert_eq!(legend_origin(area, size, &high), (296, 246));
+    }
+
+    #[test]
+    fn a_falling_curve_puts_the_legend_top_right() {
+        let dir = std::env::temp_dir().join(format!("asi-plot-legend-{}", std::process::id()));
+        let runs: Vec<PathBuf> = (0..2).map(|s| dir.join(format!("arm_seed-{s}"))).collect();
+        for (s, run) in runs.iter().enumerate() {
+            std::fs::create_dir_all(run).unwrap();
+            let lines: String = (0..20)
+                .map(|k| {
+                    let m = (1.0 - k as f64 * 0.05) * (1.0 - s as f64 * 0.05);
+                    format!("{{\"x\":{},\"m\":{m}}}\n", k * 100)
+                })
+                .collect();
+            std::fs::write(run.join("metrics.jsonl"), lines).unwrap();
+        }
+        let figure = build_figure(&runs, "x", &["m".to_owned()]).unwrap();
+        let out = dir.join("plot.png");
+        render_png(&figure, &out).unwrap();
+        let (width, _, pixels) = read_rgb_png(&out);
+        std::fs::remove_dir_all(&dir).unwrap();
+        // Label text pixels in the legend's first row, left and right in the plot area.
+        let width = width as usize;
+        let first_row = MARGIN_T + LEGEND_INSET + LEGEND_PAD;
+        let text_pixels = |cols: std::ops::Range<i32>| {
+            (first_row..first_row + 14)
+                .flat_map(|r| cols.clone().map(move |c| (r as usize, c as usize)))
+                .filter(|&(r, c)| pixels[3 * (r * width + c)..][..3] == [TEXT.0, TEXT.1, TEXT.2])
+                .count()
+        };
+        let right = PANEL_W as i32 - MARGIN_R;
+        assert!(
+            text_pixels(right - 150..right - 10) > 20,
+            "legend at the top right"
+        );
+        assert_eq!(
+            text_pixels(MARGIN_L + LEGEND_TEXT_X..MARGIN_L + 150),
+            0,
+            "nothing at the top left, where the curve starts"
+        );
     }
 }
