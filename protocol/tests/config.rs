@@ -314,6 +314,48 @@ fn the_default_config_file_is_the_defaults() {
     assert_eq!(config, Config::default());
 }
 
+/// `configs/antmaze-u-1000.toml` doubles the episode and halves every count in episodes, so
+/// its episode e is the default config's episode 2e in env steps and schedules: the defaults
+/// with exactly those changes (a default counted in episodes and left out of the file fails
+/// here).
+#[test]
+fn the_1000_step_config_is_the_defaults_with_every_episode_count_halved() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/antmaze-u-1000.toml");
+    let config = Config::load(Some(&path), &[]).expect("loads");
+    let mut expected = Config::default();
+    expected.run.name = "antmaze-u-1000".into();
+    expected.env.episode_length = Some(1000);
+    // Updates per env step stay those of 500-step episodes (200 per episode / 500).
+    let low_default = expected.learner.low.updates_per_env_step_for(500);
+    expected.learner.low.updates_per_env_step = Some(low_default);
+    let half = |n: u64| {
+        assert_eq!(n % 2, 0, "{n} episodes cannot be halved");
+        n / 2
+    };
+    expected.run.max_episodes = half(expected.run.max_episodes);
+    expected.eval.interval_episodes = half(expected.eval.interval_episodes);
+    expected.learner.high.random_episodes = half(expected.learner.high.random_episodes);
+    let det = &mut expected.learner.low.deterministic;
+    det.lr_decay_episodes = half(det.lr_decay_episodes);
+    let enc = &mut expected.encoder;
+    enc.interval_episodes = half(enc.interval_episodes);
+    enc.first_round_episode = half(enc.first_round_episode);
+    enc.stable_coeff_switch_episode = half(enc.stable_coeff_switch_episode);
+    let ex = &mut expected.exploration;
+    ex.potential_start_episode = half(ex.potential_start_episode);
+    ex.explore_start_episode = half(ex.explore_start_episode);
+    ex.future_count_interval_episodes = half(ex.future_count_interval_episodes);
+    ex.count_prob_interval_episodes = half(ex.count_prob_interval_episodes);
+    ex.count_prob_success_unit /= 2.0;
+    let asi = &mut expected.asi;
+    asi.fr_start_episode = half(asi.fr_start_episode);
+    asi.si_start_episode = half(asi.si_start_episode);
+    for step in &mut asi.fr_prob_schedule {
+        step.from_episode = half(step.from_episode);
+    }
+    assert_eq!(config, expected);
+}
+
 #[test]
 fn a_route_table_cap_beyond_16_bit_node_ids_is_refused() {
     let errors = invalid(Config::load(
