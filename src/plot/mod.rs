@@ -1061,24 +1061,34 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    #[test]
-    fn a_figure_renders_to_a_png_file() {
-        let dir = std::env::temp_dir().join(format!("asi-plot-png-{}", std::process::id()));
+    /// Two seeds of one arm (`arm_seed-0`, `arm_seed-1`) in a fresh folder named after `tag`:
+    /// seed s has metric `m` = `value(s, k)` at x = 100 k for k < `points(s)`. Returns the
+    /// folder (the caller removes it) and the run directories.
+    fn two_seed_runs(
+        tag: &str,
+        points: impl Fn(usize) -> usize,
+        value: impl Fn(usize, usize) -> f64,
+    ) -> (PathBuf, Vec<PathBuf>) {
+        let dir = std::env::temp_dir().join(format!("asi-plot-{tag}-{}", std::process::id()));
         let runs: Vec<PathBuf> = (0..2).map(|s| dir.join(format!("arm_seed-{s}"))).collect();
         for (s, run) in runs.iter().enumerate() {
             std::fs::create_dir_all(run).unwrap();
-            // Seed 1 runs on past seed 0's end (x = 1,900) to x = 2,300: a dashed tail.
-            let lines: String = (0..20 + 4 * s)
-                .map(|k| {
-                    format!(
-                        "{{\"x\":{},\"m\":{}}}\n",
-                        k * 100,
-                        k as f64 * 0.05 * (1.0 + s as f64 * 0.1)
-                    )
-                })
+            let lines: String = (0..points(s))
+                .map(|k| format!("{{\"x\":{},\"m\":{}}}\n", k * 100, value(s, k)))
                 .collect();
             std::fs::write(run.join("metrics.jsonl"), lines).unwrap();
         }
+        (dir, runs)
+    }
+
+    #[test]
+    fn a_figure_renders_to_a_png_file() {
+        // Seed 1 runs on past seed 0's end (x = 1,900) to x = 2,300: a dashed tail.
+        let (dir, runs) = two_seed_runs(
+            "png",
+            |s| 20 + 4 * s,
+            |s, k| k as f64 * 0.05 * (1.0 + s as f64 * 0.1),
+        );
         let figure = build_figure(&runs, "x", &["m".to_owned(), "absent".to_owned()]).unwrap();
         assert_eq!(figure.arms.len(), 1);
         assert_eq!(figure.arms[0].1[0].as_ref().unwrap().n_seeds, 2);
@@ -1153,18 +1163,11 @@ mod tests {
 
     #[test]
     fn a_falling_curve_puts_the_legend_top_right() {
-        let dir = std::env::temp_dir().join(format!("asi-plot-legend-{}", std::process::id()));
-        let runs: Vec<PathBuf> = (0..2).map(|s| dir.join(format!("arm_seed-{s}"))).collect();
-        for (s, run) in runs.iter().enumerate() {
-            std::fs::create_dir_all(run).unwrap();
-            let lines: String = (0..20)
-                .map(|k| {
-                    let m = (1.0 - k as f64 * 0.05) * (1.0 - s as f64 * 0.05);
-                    format!("{{\"x\":{},\"m\":{m}}}\n", k * 100)
-                })
-                .collect();
-            std::fs::write(run.join("metrics.jsonl"), lines).unwrap();
-        }
+        let (dir, runs) = two_seed_runs(
+            "legend",
+            |_| 20,
+            |s, k| (1.0 - k as f64 * 0.05) * (1.0 - s as f64 * 0.05),
+        );
         let figure = build_figure(&runs, "x", &["m".to_owned()]).unwrap();
         let out = dir.join("plot.png");
         render_png(&figure, &out).unwrap();
