@@ -13,14 +13,20 @@ With `--base ARM` (e.g. hess) it adds, for every other arm, the paired differenc
 and over `--over A-B` (default: the first to the last episode of `--at`) the mean paired
 difference of the per-episode values and the number of episodes where the seed mean of the
 arm is above the base's. Standard library only; a run that has not reached an episode shows
-`-` there.
+`-` there. Under the tables, the notes of scripts/launch_history.py on the runs' launch
+histories (resumes that were not bit-exact, several builds or CPUs), when there are any.
 """
 import argparse
 import json
+import os
 import re
 import statistics
 import sys
 from collections import defaultdict
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import launch_history  # noqa: E402
 
 
 def per_episode(path, metric):
@@ -101,14 +107,24 @@ def main():
             each = " / ".join("-" if v is None else f"{v:.3f}" for v in vals)
             cells.append(f"**{statistics.mean(got):.3f}** ({each})" if got else "-")
         print(f"| {arm} (seeds {', '.join(map(str, sorted(seeds)))}) | " + " | ".join(cells) + " |")
-    if not args.base:
-        return 0
+    if args.base:
+        paired(arms, args.base, at, lo, hi)
+    found = launch_history.notes(args.runs)
+    if found:
+        print("\nlaunch histories (scripts/launch_history.py):")
+        for note in found:
+            print(f"- {note}")
+    return 0
 
-    base = arms[args.base]
-    print(f"\npaired difference arm − {args.base} (mean ± sd over seeds)")
+
+def paired(arms, base_arm, at, lo, hi):
+    """The table of paired differences against `base_arm`."""
+
+    base = arms[base_arm]
+    print(f"\npaired difference arm − {base_arm} (mean ± sd over seeds)")
     print("| arm | " + " | ".join(str(e) for e in at) + f" | mean over {lo}–{hi} | episodes above |")
     for arm, seeds in arms.items():
-        if arm == args.base:
+        if arm == base_arm:
             continue
         common = sorted(set(seeds) & set(base))
         cells = []
@@ -131,7 +147,6 @@ def main():
                 counted += 1
                 above += statistics.mean(p[0] - p[1] for p in pairs) > 1e-12  # not float noise
         print(f"| {arm} | " + " | ".join(cells) + f" | {mean_sd(run_means)} | {above} of {counted} |")
-    return 0
 
 
 if __name__ == "__main__":

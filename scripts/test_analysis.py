@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Tests of the analysis scripts (fr_trace.py, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
-count_choice.py) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
+count_choice.py, launch_history.py and arm_table.py's notes) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
 
     python3 scripts/test_analysis.py
 
@@ -21,6 +21,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import fr_outcomes  # noqa: E402
 import count_choice  # noqa: E402
 import fr_trace  # noqa: E402
+import launch_history  # noqa: E402
 import maze_path  # noqa: E402
 import store_reach  # noqa: E402
 
@@ -513,6 +514,91 @@ class Options(unittest.TestCase):
         with self.assertRaises(SystemExit) as caught:
             self.parse(["--seed", "1"])
         self.assertEqual(caught.exception.code, 2)
+
+
+def start(launch, resumed_from=None, binary="b1", cpu="Xeon", **extra):
+    """A `start` line of launches.jsonl as `asi train` writes it (the fields the script reads)."""
+    return {
+        "event": "start", "launch": launch, "at": f"2026-12-05T0{launch}:00:00Z", "mode": "serial",
+        "binary": binary, "host": {"cpu": cpu, "logical_cores": 2, "rayon_threads": "1"},
+        "resumed_from": resumed_from, **extra,
+    }
+
+
+class LaunchHistory(unittest.TestCase):
+    CKPT2 = {"checkpoint": 2, "env_steps": 1000, "episodes": 20}
+
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.addCleanup(self.tmp.cleanup)
+
+    def run_dir(self, name, records, broken_tail=False):
+        path = os.path.join(self.tmp.name, name)
+        os.makedirs(path)
+        with open(os.path.join(path, "metrics.jsonl"), "w") as out:
+            for episodes, coverage in ((10, 0.25), (20, 0.5)):
+                out.write(json.dumps({"learner/schedule/train_episodes": episodes,
+                                      "learner/charts/coverage": coverage}) + "\n")
+        if records is not None:
+            with open(os.path.join(path, "launches.jsonl"), "w") as out:
+                out.writelines(json.dumps(r) + "\n" for r in records)
+                if broken_tail:
+                    out.write('{"event":"st')
+        return path
+
+    def three_runs(self):
+        clean = self.run_dir("asi_s0", [
+            start(0), {"event": "end", "launch": 0, "outcome": "stopped", "checkpoint": self.CKPT2},
+            start(1, self.CKPT2), {"event": "resume", "launch": 1, "exact": True, "detail": "ok"},
+            {"event": "end", "launch": 1, "outcome": "budget_reached", "checkpoint": None},
+        ], broken_tail=True)
+        inexact = self.run_dir("asi_s1", [
+            start(0), start(1, self.CKPT2, binary="b2", cpu="EPYC"),
+            {"event": "resume", "launch": 1, "exact": False, "detail": "2 open episodes are lost"},
+        ])
+        unrecorded = self.run_dir("hess_s0", [start(0, self.CKPT2, earlier_launches_unrecorded=True)])
+        bare = self.run_dir("hess_s1", None)
+        return clean, inexact, unrecorded, bare
+
+    def test_notes_name_what_can_make_a_run_part_from_its_seed(self):
+        clean, inexact, unrecorded, bare = self.three_runs()
+        self.assertEqual(launch_history.notes([clean]), [], "exact resumes, one build, one CPU")
+        found = launch_history.notes([clean, inexact, unrecorded, bare])
+        self.assertEqual(found, [
+            f"{inexact}: launch 1 resumed from ckpt 2 (1000 steps, 20 episodes) not bit-exactly "
+            "(2 open episodes are lost)",
+            f"{unrecorded}: the launches before launch 0 are not in its history",
+            f"no launch history (runs from before it was recorded): {bare}",
+            f"2 builds among these runs (b1: {', '.join(sorted([clean, inexact, unrecorded]))}; "
+            f"b2: {inexact})",
+            f"2 CPU models among these runs (EPYC: {inexact}; "
+            f"Xeon: {', '.join(sorted([clean, inexact, unrecorded]))})",
+        ])
+
+    def test_one_line_per_launch_and_a_killed_line_is_skipped(self):
+        clean, inexact, _, _ = self.three_runs()
+        rows = launch_history.describe(launch_history.read(clean))
+        self.assertEqual(rows, [
+            "  0: 2026-12-05T00:00:00Z serial, build b1, Xeon; from fresh; "
+            "stopped, newest ckpt 2 (1000 steps, 20 episodes)",
+            "  1: 2026-12-05T01:00:00Z serial, build b1, Xeon; from ckpt 2 (1000 steps, 20 episodes), "
+            "exact; budget_reached, no checkpoint",
+        ])
+        rows = launch_history.describe(launch_history.read(inexact))
+        self.assertTrue(rows[0].endswith("no end line (killed, or running)"), rows)
+        self.assertIn("NOT exact", rows[1])
+
+    def test_arm_table_prints_the_notes_under_its_tables(self):
+        clean, inexact, _, _ = self.three_runs()
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "arm_table.py")
+        out = subprocess.run([sys.executable, script, "--at", "20", clean, inexact],
+                             capture_output=True, text=True, check=True).stdout
+        self.assertIn("| asi (seeds 0, 1) | **0.500** (0.500 / 0.500) |", out)
+        tail = out.split("launch histories (scripts/launch_history.py):\n")[1]
+        self.assertTrue(tail.startswith(f"- {inexact}: launch 1 resumed from ckpt 2"), tail)
+        out = subprocess.run([sys.executable, script, "--at", "20", clean],
+                             capture_output=True, text=True, check=True).stdout
+        self.assertNotIn("launch histories", out)
 
 
 if __name__ == "__main__":

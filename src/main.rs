@@ -49,14 +49,26 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         .unwrap_or_else(|| Command::Train(cli::TrainArgs::default()))
     {
         Command::Train(args) => {
-            let launcher::Launch::Start(ctx) = launcher::prepare(&args)? else {
+            let launcher::Launch::Start(mut ctx) = launcher::prepare(&args)? else {
                 return Ok(());
             };
-            if args.serial {
-                serial::run(*ctx)
-            } else {
-                launcher::run(*ctx)
+            let mode = match args.serial {
+                true => run::launches::Mode::Serial,
+                false => run::launches::Mode::Processes,
+            };
+            let launch = run::launches::begin(&ctx, mode)?;
+            ctx.launch = Some(launch);
+            // A clone holds the folder's lock until the end line is written.
+            let held = (*ctx).clone();
+            let ending = match mode {
+                run::launches::Mode::Serial => serial::run(*ctx),
+                run::launches::Mode::Processes => launcher::run(*ctx),
+            };
+            // The history is a record: failing to write it does not change the exit status.
+            if let Err(err) = run::launches::end(&held.run_dir, launch, &ending) {
+                tracing::warn!("recording the end of launch {launch}: {err:#}");
             }
+            ending.map(drop)
         }
         Command::Learner(args) => {
             proc::learner::run(&run::RunContext::open(&args.run_dir, &args.run_id)?)

@@ -22,6 +22,7 @@ use learner::{Learner, TaskDims};
 use protocol::config::RESOLVED_CONFIG_FILE;
 use protocol::{Config, RunId};
 
+pub mod launches;
 mod tail;
 
 pub use tail::{move_lines_past, move_metrics_past, MovedTail, ResumePoint};
@@ -42,19 +43,24 @@ pub struct RunContext {
     pub run_id: RunId,
     /// Launcher side: this launch resumes from a checkpoint (outputs are appended to).
     pub resume: bool,
+    /// Launcher side: the checkpoint it resumes from.
+    pub resumed_from: Option<ResumePoint>,
+    /// Launcher side: this launch's number in the folder's history
+    /// ([`launches::LAUNCHES_FILE`]), once its `start` line is written.
+    pub launch: Option<u64>,
     /// Launcher side: the folder's lock, held while any clone of the context lives.
     pub(crate) _lock: Option<std::sync::Arc<RunLock>>,
 }
 
 impl RunContext {
     /// Launcher side: creates the run folder, writes the resolved config and a fresh run id,
-    /// and clears the status files of an earlier launch in the same folder; `resume` says
-    /// whether this launch continues from a checkpoint; `lock` is the folder's, held from
+    /// and clears the status files of an earlier launch in the same folder; `resumed_from` is
+    /// the checkpoint this launch continues from, if any; `lock` is the folder's, held from
     /// before the resume decision.
     pub fn create(
         config: Config,
         run_dir: PathBuf,
-        resume: bool,
+        resumed_from: Option<ResumePoint>,
         lock: RunLock,
     ) -> anyhow::Result<Self> {
         let status = run_dir.join(STATUS_DIR);
@@ -74,7 +80,9 @@ impl RunContext {
             config,
             run_dir,
             run_id,
-            resume,
+            resume: resumed_from.is_some(),
+            resumed_from,
+            launch: None,
             _lock: Some(std::sync::Arc::new(lock)),
         })
     }
@@ -97,6 +105,8 @@ impl RunContext {
             run_dir: run_dir.to_owned(),
             run_id: current,
             resume: false,
+            resumed_from: None,
+            launch: None,
             _lock: None,
         })
     }
@@ -190,15 +200,21 @@ impl RunLock {
 }
 
 /// What an earlier launch left in `run_dir` besides the files every launch rewrites (resolved
-/// config, run id, status, lock): the names of non-empty files and folders, sorted. Empty when
-/// the folder does not exist.
+/// config, run id, status, lock) and the launch history (appended to by every launch): the
+/// names of non-empty files and folders, sorted. Empty when the folder does not exist.
 pub fn earlier_outputs(run_dir: &Path) -> anyhow::Result<Vec<String>> {
     let entries = match std::fs::read_dir(run_dir) {
         Ok(entries) => entries,
         Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
         Err(err) => return Err(err).with_context(|| format!("reading {}", run_dir.display())),
     };
-    let rewritten = [RESOLVED_CONFIG_FILE, RUN_ID_FILE, STATUS_DIR, LOCK_FILE];
+    let rewritten = [
+        RESOLVED_CONFIG_FILE,
+        RUN_ID_FILE,
+        STATUS_DIR,
+        LOCK_FILE,
+        launches::LAUNCHES_FILE,
+    ];
     let mut found = Vec::new();
     for entry in entries {
         let entry = entry.with_context(|| format!("reading {}", run_dir.display()))?;
@@ -424,11 +440,12 @@ mod tests {
         std::fs::write(dir.join(RESOLVED_CONFIG_FILE), "[run]").unwrap();
         std::fs::write(dir.join(RUN_ID_FILE), "r-1").unwrap();
         std::fs::write(dir.join(LOCK_FILE), "1").unwrap();
+        std::fs::write(dir.join(launches::LAUNCHES_FILE), "{}\n").unwrap();
         std::fs::write(dir.join("metrics.jsonl"), "").unwrap();
         std::fs::create_dir_all(dir.join("plots")).unwrap();
         assert!(
             earlier_outputs(&dir).unwrap().is_empty(),
-            "only rewritten files, an empty file and an empty folder"
+            "only rewritten files, the history, an empty file and an empty folder"
         );
         std::fs::write(dir.join("metrics.jsonl"), "{}\n").unwrap();
         std::fs::create_dir_all(dir.join("checkpoints/graph-service")).unwrap();

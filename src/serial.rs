@@ -82,7 +82,9 @@ fn install_stop_handlers() {
     }
 }
 
-pub fn run(ctx: RunContext) -> anyhow::Result<()> {
+/// Trains `ctx`'s run in this process until its budget is reached or a signal arrives;
+/// `Ok(true)` when stopped by a signal.
+pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
     let mut serial = Serial::open(ctx)?;
     let mut checkpoints = crate::run::CheckpointTimer::new(&serial.ctx.config);
     install_stop_handlers();
@@ -126,7 +128,8 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
         }
         serial.picture.tick(episodes, &serial.graph.service);
     }
-    serial.finish(stopped)
+    serial.finish(stopped)?;
+    Ok(stopped)
 }
 
 /// Everything the serial loop drives and keeps.
@@ -205,19 +208,23 @@ impl Serial {
     /// round at which the checkpoint was written, whose broadcast the actors already hold
     /// (publishing here would add a broadcast).
     fn start(&mut self, saved: Option<checkpoint::Restored>) -> anyhow::Result<()> {
-        let exact = match saved {
+        let (exact, detail) = match saved {
             Some(saved) => self.restore(saved)?,
             None => {
+                let detail = format!(
+                    "no serial checkpoint in {}: the actors start new episodes and the resumed \
+                     run is not bit-identical to an uninterrupted one",
+                    self.serial_dir.display()
+                );
                 if self.ctx.resume {
-                    tracing::warn!(
-                        "no serial checkpoint in {}: the actors start new episodes and the \
-                         resumed run is not bit-identical to an uninterrupted one",
-                        self.serial_dir.display()
-                    );
+                    tracing::warn!("{detail}");
                 }
-                false
+                (false, detail)
             }
         };
+        if let (true, Some(launch)) = (self.ctx.resume, self.ctx.launch) {
+            crate::run::launches::resumed(&self.ctx.run_dir, launch, exact, &detail)?;
+        }
         if exact {
             self.line_at = Some(self.learner.progress().env_steps_ingested);
             return Ok(());
@@ -354,8 +361,8 @@ impl Serial {
 
     /// Restores a serial checkpoint into the fresh components; true when the resume is exact
     /// (see [`checkpoint::Manifest::exact`], and of the same moment as the restored learner
-    /// and graph-service).
-    fn restore(&mut self, saved: checkpoint::Restored) -> anyhow::Result<bool> {
+    /// and graph-service), with what makes it so or not.
+    fn restore(&mut self, saved: checkpoint::Restored) -> anyhow::Result<(bool, String)> {
         let checkpoint::Restored {
             state,
             weights: (header, bytes),
@@ -389,22 +396,33 @@ impl Serial {
             self.graph.service.stats().stored_steps,
         );
         let matched = replayed && now == (manifest.learner_env_steps, manifest.graph_stored_steps);
-        if !matched {
-            tracing::warn!(
-                "serial checkpoint {} is of another moment (learner env steps, graph stored steps) \
-                 = ({}, {}) than the restored learner and graph-service {now:?}: the resume is not \
-                 bit-exact",
+        let detail = if !matched {
+            let detail = format!(
+                "serial checkpoint {} is of another moment (learner env steps, graph stored \
+                 steps) = ({}, {}) than the restored learner and graph-service {now:?}{}: the \
+                 resume is not bit-exact",
                 path.display(),
                 manifest.learner_env_steps,
-                manifest.graph_stored_steps
+                manifest.graph_stored_steps,
+                if replayed {
+                    ""
+                } else {
+                    ", and the graph-service's inputs were not replayed"
+                }
             );
-        } else if !manifest.exact() {
-            tracing::warn!(
+            tracing::warn!("{detail}");
+            detail
+        } else {
+            let detail = format!(
                 "serial checkpoint {}: {}",
                 path.display(),
                 manifest.exactness()
             );
-        }
+            if !manifest.exact() {
+                tracing::warn!("{detail}");
+            }
+            detail
+        };
         let exact = matched && manifest.exact();
         let how = if exact {
             "bit-exact resume"
@@ -412,7 +430,7 @@ impl Serial {
             "resume not bit-exact"
         };
         tracing::info!("serial state restored from {}: {how}", path.display());
-        Ok(exact)
+        Ok((exact, detail))
     }
 }
 

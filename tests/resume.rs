@@ -292,6 +292,49 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
         "the budget counts both launches: {after}"
     );
     assert_eq!(dir.checkpoints(), ["ckpt-000001", "ckpt-000002"]);
+    // The history: two launches (the one with nothing to do started none), the second
+    // resumed from checkpoint 1, not exactly (process mode), and both reached their budget.
+    let history: Vec<Value> = std::fs::read_to_string(dir.0.join("launches.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let events: Vec<(&str, u64)> = history
+        .iter()
+        .map(|r| (r["event"].as_str().unwrap(), as_u64(r, "launch")))
+        .collect();
+    assert_eq!(
+        events,
+        [
+            ("start", 0),
+            ("end", 0),
+            ("start", 1),
+            ("resume", 1),
+            ("end", 1)
+        ],
+        "{history:#?}"
+    );
+    assert_eq!(history[0]["mode"], "processes");
+    assert!(history[0]["resumed_from"].is_null(), "{}", history[0]);
+    assert_eq!(history[1]["outcome"], "budget_reached", "{}", history[1]);
+    assert_eq!(history[1]["checkpoint"]["checkpoint"], 1, "{}", history[1]);
+    assert_eq!(
+        history[2]["resumed_from"]["checkpoint"], 1,
+        "{}",
+        history[2]
+    );
+    assert_eq!(as_u64(&history[2]["resumed_from"], "env_steps"), steps);
+    assert_eq!(history[3]["exact"], false, "{}", history[3]);
+    assert!(
+        history[3]["detail"]
+            .as_str()
+            .unwrap()
+            .contains("process mode"),
+        "{}",
+        history[3]
+    );
+    assert_eq!(history[4]["outcome"], "budget_reached", "{}", history[4]);
+    assert_eq!(history[4]["checkpoint"]["checkpoint"], 2, "{}", history[4]);
     // The graph-service started from its checkpoint: the store and counters went on.
     let graph_after = dir.status("graph-service");
     assert_eq!(

@@ -117,6 +117,73 @@ fn wait_success(mut child: Child, args: &[String]) -> Output {
     output
 }
 
+/// The run folder's launch history (`launches.jsonl`), a JSON value per line.
+fn history(dir: &Path) -> Vec<serde_json::Value> {
+    lines(&dir.join("launches.jsonl"))
+        .iter()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+/// The records of launch `launch` in `history`, as (event, record).
+fn launch_records(history: &[serde_json::Value], launch: u64) -> Vec<(&str, &serde_json::Value)> {
+    history
+        .iter()
+        .filter(|r| r["launch"].as_u64() == Some(launch))
+        .map(|r| (r["event"].as_str().unwrap(), r))
+        .collect()
+}
+
+/// Checks launch `launch` of `history`: started (resumed from a checkpoint of `resumed_from`
+/// episodes, or fresh), resumed exactly if it resumed, and ended with `outcome` and a newest
+/// checkpoint of `ended_at` episodes (no end line when `outcome` is `None`: killed).
+fn assert_launch(
+    history: &[serde_json::Value],
+    launch: u64,
+    resumed_from: Option<u64>,
+    outcome: Option<(&str, u64)>,
+) {
+    let records = launch_records(history, launch);
+    let events: Vec<&str> = records.iter().map(|(e, _)| *e).collect();
+    let mut expected = vec!["start"];
+    if resumed_from.is_some() {
+        expected.push("resume");
+    }
+    if outcome.is_some() {
+        expected.push("end");
+    }
+    assert_eq!(events, expected, "launch {launch}: {history:#?}");
+    let start = records[0].1;
+    assert_eq!(start["mode"], "serial", "{start}");
+    assert_eq!(start["seed"], history[0]["seed"], "{start}");
+    assert_eq!(
+        start["binary"], history[0]["binary"],
+        "one build for every launch: {start}"
+    );
+    assert!(
+        start["command"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|a| a == "--serial"),
+        "{start}"
+    );
+    assert_eq!(
+        start["resumed_from"]["episodes"].as_u64(),
+        resumed_from,
+        "{start}"
+    );
+    if resumed_from.is_some() {
+        assert_eq!(records[1].1["exact"], true, "{}", records[1].1);
+    }
+    if let Some((outcome, episodes)) = outcome {
+        let end = records.last().unwrap().1;
+        assert_eq!(end["outcome"], outcome, "{end}");
+        assert_eq!(end["checkpoint"]["episodes"], episodes, "{end}");
+        assert!(end["error"].is_null(), "{end}");
+    }
+}
+
 fn lines(path: &Path) -> Vec<String> {
     std::fs::read_to_string(path)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -214,6 +281,25 @@ fn run_chain(dir: &Path, stops: &[u64], extra: &[String]) {
             "timed checkpoints between the final ones: {total} in {launches} launches"
         );
     }
+    // The history holds every launch: where it resumed from, that it resumed exactly, where
+    // it ended; and each launch's own resolved config (run.max_episodes differs).
+    let history = history(dir);
+    let ends: Vec<u64> = stops.iter().copied().chain([N_EPISODES]).collect();
+    for (k, &episodes) in ends.iter().enumerate() {
+        let resumed_from = k.checked_sub(1).map(|previous| ends[previous]);
+        assert_launch(
+            &history,
+            k as u64,
+            resumed_from,
+            Some(("budget_reached", episodes)),
+        );
+    }
+    assert_eq!(history.len(), 3 * ends.len() - 1, "{history:#?}");
+    let configs: std::collections::HashSet<&str> = history
+        .iter()
+        .filter_map(|r| r["config"].as_str())
+        .collect();
+    assert_eq!(configs.len(), ends.len(), "{history:#?}");
 }
 
 #[test]
@@ -383,6 +469,16 @@ fn kill_past_a_checkpoint_and_resume(dir: &Path) -> u64 {
         .collect();
     assert_eq!(side.len(), 1, "{side:?}");
     assert!(std::fs::read_to_string(&side[0]).unwrap() == tail);
+    // The killed launch has no end line; the next one resumed exactly from checkpoint 1.
+    let history = history(dir);
+    assert_launch(&history, 0, None, Some(("budget_reached", CHECKPOINTED)));
+    assert_launch(&history, 1, Some(CHECKPOINTED), None);
+    assert_launch(
+        &history,
+        2,
+        Some(CHECKPOINTED),
+        Some(("budget_reached", N_EPISODES)),
+    );
     killed
 }
 
@@ -415,6 +511,14 @@ fn stop_by_signal_and_resume(dir: &Path) -> u64 {
     assert!(
         stderr.contains("bit-exact resume"),
         "the launch after the signal resumes exactly: {stderr}"
+    );
+    let history = history(dir);
+    assert_launch(&history, 0, None, Some(("stopped", stopped)));
+    assert_launch(
+        &history,
+        1,
+        Some(stopped),
+        Some(("budget_reached", N_EPISODES)),
     );
     stopped
 }
@@ -461,6 +565,17 @@ fn a_serial_checkpoint_of_other_actors_or_a_corrupt_one_is_refused_with_a_clear_
         metrics_before,
         "a refused resume writes nothing"
     );
+    // Nothing but its record in the history: both refused launches failed, with the reason.
+    let history = history(&dir);
+    for (launch, reason) in [(1, "(actors, seed, task)"), (2, "checksum")] {
+        let records = launch_records(&history, launch);
+        let events: Vec<&str> = records.iter().map(|(e, _)| *e).collect();
+        assert_eq!(events, ["start", "end"], "{history:#?}");
+        let end = records[1].1;
+        assert_eq!(end["outcome"], "failed", "{end}");
+        assert!(end["error"].as_str().unwrap().contains(reason), "{end}");
+        assert_eq!(end["checkpoint"]["checkpoint"], 1, "{end}");
+    }
 }
 
 #[test]
@@ -480,6 +595,21 @@ fn a_run_ended_mid_episode_by_its_step_budget_resumes_and_says_it_is_not_exact()
     );
     let written = lines(&dir.join("metrics.jsonl"));
     assert_eq!(written.last().map(|l| episodes_of(l)), Some(4));
+    // The history says so too.
+    let history = history(&dir);
+    let resume = launch_records(&history, 1)
+        .into_iter()
+        .find(|(event, _)| *event == "resume")
+        .expect("a resume line")
+        .1;
+    assert_eq!(resume["exact"], false, "{resume}");
+    assert!(
+        resume["detail"]
+            .as_str()
+            .unwrap()
+            .contains("2 open episodes are lost"),
+        "{resume}"
+    );
 }
 
 #[test]
@@ -553,10 +683,15 @@ fn files_of(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 }
 
 /// Forks the run in `from` as the experiments do, with `cp -a` of the whole folder to `to`,
-/// after checking that no file of it names its folder (the copy must be self-contained).
+/// after checking that no file of it names its folder (the copy must be self-contained). The
+/// launch history is the exception: it records the commands that made the prefix, which name
+/// the folder they ran in, and nothing reads a path from it.
 fn fork(from: &Path, to: &Path) {
     let name = from.to_str().unwrap().as_bytes();
     for (path, bytes) in files_of(from) {
+        if path.file_name().is_some_and(|n| n == "launches.jsonl") {
+            continue;
+        }
         assert!(
             !bytes.windows(name.len()).any(|w| w == name),
             "{} names its run folder: a copy would lead back to the original",
@@ -637,6 +772,36 @@ fn ablation_arms_forked_from_a_shared_serial_prefix_equal_runs_started_with_thei
     fork(&fr, &both);
     launch(&both, N_FORKED, &[], true, "FR+SI fork");
     launch(&early, N_FORKED, &[], true, "early switch");
+    // The fork's history is its prefix's launches (two of HESS, one of the FR fork), then
+    // its own, each resumed exactly from where the one before it ended.
+    let forked = history(&both);
+    for (k, resumed_from) in [None, Some(EARLY_SWITCH), Some(fr_start), Some(si_start)]
+        .into_iter()
+        .enumerate()
+    {
+        let ended_at = [EARLY_SWITCH, fr_start, si_start, N_FORKED][k];
+        assert_launch(
+            &forked,
+            k as u64,
+            resumed_from,
+            Some(("budget_reached", ended_at)),
+        );
+    }
+    let run_dir_of = |k: usize| {
+        let start = launch_records(&forked, k as u64)[0].1;
+        let command: Vec<&str> = start["command"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|a| a.as_str().unwrap())
+            .collect();
+        let at = command.iter().position(|a| *a == "--run-dir").unwrap();
+        PathBuf::from(command[at + 1])
+    };
+    assert_eq!(
+        [run_dir_of(0), run_dir_of(2), run_dir_of(3)],
+        [hess.clone(), fr.clone(), both.clone()]
+    );
     for (what, dir) in [
         (format!("forked at {fr_start} and {si_start}"), &both),
         (format!("switched on at {EARLY_SWITCH}"), &early),

@@ -437,6 +437,8 @@ mod tests {
             run_dir: dir.clone(),
             run_id: protocol::RunId::new("t-1").unwrap(),
             resume: false,
+            resumed_from: None,
+            launch: None,
             _lock: None,
         };
         (Children::new(&ctx).unwrap(), dir)

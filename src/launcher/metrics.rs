@@ -325,6 +325,8 @@ mod tests {
             run_dir: dir.clone(),
             run_id: protocol::RunId::new("t-1").unwrap(),
             resume: false,
+            resumed_from: None,
+            launch: None,
             _lock: None,
         };
         // A fresh run: the files are opened without O_APPEND, so only the explicit move to

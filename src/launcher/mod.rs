@@ -54,13 +54,25 @@ enum Ending {
     Signal,
 }
 
-pub fn run(ctx: RunContext) -> anyhow::Result<()> {
+/// Process mode: starts the services, then the actors and the evaluator, and supervises them
+/// until the budget is reached or a signal arrives; `Ok(true)` when stopped by a signal.
+pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
     let config = &ctx.config;
     let layout = task_info(config)?.layout;
     let node = node(&ctx, "launcher")?;
     if catch_termination_signals(&node) {
         tracing::info!("stopped by signal while starting; nothing was started");
-        return Ok(());
+        return Ok(true);
+    }
+    if let (Some(launch), Some(point)) = (ctx.launch, ctx.resumed_from) {
+        // Recorded before the learner restores it: a process-mode resume is never exact.
+        let detail = format!(
+            "process mode: the learner restores checkpoint {}, the actors start new episodes \
+             and the processes run concurrently, so the run is not bit-identical to an \
+             uninterrupted one",
+            point.sequence.unwrap_or(0)
+        );
+        crate::run::launches::resumed(&ctx.run_dir, launch, false, &detail)?;
     }
     clean_stale_resources(&node);
     let channels = Channels::new(config, &ctx.run_id, &layout);
@@ -92,7 +104,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
             "stopped by signal while starting; run folder {}",
             ctx.run_dir.display()
         );
-        return Ok(());
+        return Ok(true);
     }
     for id in 0..config.run.n_actors as u32 {
         children.spawn(ChildKind::Actor(id))?;
@@ -108,11 +120,12 @@ pub fn run(ctx: RunContext) -> anyhow::Result<()> {
     book.flush(children.total_restarts())?;
     book.finish();
     clean_stale_resources(&node);
-    match ending? {
+    let ending = ending?;
+    match ending {
         Ending::BudgetReached => tracing::info!("training budget reached; run finished"),
         Ending::Signal => tracing::info!("stopped by signal; run folder {}", ctx.run_dir.display()),
     }
-    Ok(())
+    Ok(ending == Ending::Signal)
 }
 
 /// Removes iceoryx2 resources of dead nodes (e.g. processes SIGKILLed in an earlier run).
@@ -336,7 +349,7 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
             lock = RunLock::acquire(&run_dir)?;
         }
     }
-    let resume = match resume_point(&config, &run_dir)? {
+    let resumed_from = match resume_point(&config, &run_dir)? {
         Some(manifest) => {
             if let Some(done) = finished(&config.run, &manifest) {
                 println!(
@@ -368,15 +381,18 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
                     moved.side_file.display()
                 );
             }
-            true
+            Some(point)
         }
         None => {
             refuse_outputs_without_checkpoint(&run_dir)?;
-            false
+            None
         }
     };
     Ok(Launch::Start(Box::new(RunContext::create(
-        config, run_dir, resume, lock,
+        config,
+        run_dir,
+        resumed_from,
+        lock,
     )?)))
 }
 
