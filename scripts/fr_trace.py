@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """When and where frontier-reaching (FR) walks end, from the actor's FR decision trace.
 
-    scripts/fr_trace.py [--task NAME] [--by T] [--list] [--segments] LOG...
+    scripts/fr_trace.py [--task NAME] [--by T] [--list] [--segments] [--frontiers] LOG...
 
 Each LOG is the output of an AntMaze run started with `RUST_LOG=info,actor=debug` (serial mode
 or an actor's log): every FR decision is a line "FR decision episode=E t=T xy=Some([x, y]) ...
@@ -21,7 +21,19 @@ waypoint decision followed by the next decision of the same episode, c env steps
 binned by its starting φ distance to the waypoint, with the medians of the ratio end/start
 distance, how far φ and the torso xy moved (net) and how much of the distance was closed; and
 the φ length of a route hop (consecutive route indices seen in one episode), which the
-waypoint offset k multiplies. Standard library only.
+waypoint offset k multiplies.
+
+`--frontiers` asks where the near-frontier switches fired relative to the frontier, in the
+maze: whether a walk stopped across a wall from its frontier (the switch is a Euclidean test in
+φ, within `asi.frontier_epsilon`, so it can fire through a wall where a corridor folds back).
+The trace gives the frontier in φ only ("FR episode assigned ... frontier=[..]", the line
+before the episode's first decision); its place in the maze is estimated as the xy of the
+decision state, of any FR episode within ±5 episodes, whose φ is nearest to it, and counts as
+located when that φ is within 4 φ units (φ drifts between rounds, so a frontier no walk came
+near is left out). A switch counts as through a wall when the straight line from it to the
+frontier is at least one maze cell shorter than the way along the maze (the difference of
+their s): around one corner it cuts less than that unless both ends lie more than 1.7
+cells from the corner. Standard library only.
 """
 import math
 import re
@@ -63,6 +75,9 @@ SEGMENT = re.compile(
     r"phi=\[([-\d.e]+), ([-\d.e]+)\] choice=(\w+)(?: \{ k: \d+, index: Some\((\d+)\) \})?"
     r".*?subgoal=\[([-\d.e]+), ([-\d.e]+)\]"
 )
+ASSIGNED = re.compile(r"FR episode assigned .*?frontier=\[([-\d.e]+), ([-\d.e]+)\]")
+LOCATE_WINDOW = 5  # episodes either side whose decision states can locate a frontier
+LOCATE_PHI = 4.0  # φ units: a frontier is located when a decision state is this near it
 BIN = 4.0  # width of the starting-distance bins, φ units
 LAST_BIN = 20.0  # everything from here on is one bin
 
@@ -141,11 +156,88 @@ def print_segments(path):
         )
 
 
+def frontiers(path):
+    """{episode: frontier φ}: each "FR episode assigned" line belongs to the episode of the next
+    FR decision line."""
+    out, pending = {}, None
+    with open(path, errors="replace") as lines:
+        for line in lines:
+            line = ANSI.sub("", line)
+            assigned = ASSIGNED.search(line)
+            if assigned:
+                pending = (float(assigned[1]), float(assigned[2]))
+                continue
+            found = DECISION.search(line)
+            if found and pending is not None:
+                out[int(found[1])] = pending
+                pending = None
+    return out
+
+
+def locate(found_all, phi, episode):
+    """(xy, φ offset) of the decision state of episodes episode ± LOCATE_WINDOW whose φ is
+    nearest to `phi`, or None when no such state is within LOCATE_PHI of it."""
+    best = None
+    for (other, _), (_, _, xy, state_phi, _) in found_all.items():
+        if abs(other - episode) <= LOCATE_WINDOW:
+            offset = math.dist(state_phi, phi)
+            if best is None or offset < best[1]:
+                best = (xy, offset)
+    return best if best is not None and best[1] <= LOCATE_PHI else None
+
+
+def frontier_switches(path, maze):
+    """One row per near-frontier switch: (episode, switch s, frontier s or None, straight
+    distance in metres or None, through a wall)."""
+    found_all = decisions(path)
+    assigned = frontiers(path)
+    rows = []
+    for episode, walk in sorted(walks(path).items()):
+        t, x, y, switch = walk[-1]
+        if switch != "NearFrontier" or episode not in assigned:
+            continue
+        at = maze.progress(x, y)
+        spot = locate(found_all, assigned[episode], episode)
+        if spot is None:
+            rows.append((episode, at, None, None, False))
+            continue
+        frontier_s = maze.progress(*spot[0])
+        straight = math.dist((x, y), spot[0])
+        rows.append((episode, at, frontier_s, straight, abs(frontier_s - at) - straight >= maze.size))
+    return rows
+
+
+def print_frontiers(path, maze, listing):
+    rows = frontier_switches(path, maze)
+    located = [r for r in rows if r[2] is not None]
+    if not located:
+        print(f"  near-frontier switches: {len(rows)}, none with its frontier located")
+        return
+    walls = [r for r in located if r[4]]
+    print(
+        f"  near-frontier switches: {len(rows)}, frontier located for {len(located)} "
+        f"(frontier s median {statistics.median(r[2] for r in located):.1f} m, switch s median "
+        f"{statistics.median(r[1] for r in located):.1f} m); through a wall: {len(walls)}"
+        + (
+            f" (switch s median {statistics.median(r[1] for r in walls):.1f} m, frontier s "
+            f"median {statistics.median(r[2] for r in walls):.1f} m, straight "
+            f"{statistics.median(r[3] for r in walls):.1f} m)"
+            if walls
+            else ""
+        )
+    )
+    if listing:
+        print("  " + " ".join(
+            f"e{e}:s{at:.0f}->" + ("?" if fs is None else f"{fs:.0f}{'W' if wall else ''}")
+            for e, at, fs, _, wall in rows
+        ))
+
+
 def median_or_dash(values, fmt="{:.0f}"):
     return fmt.format(statistics.median(values)) if values else "-"
 
 
-def summarize(path, maze, by, listing, with_segments):
+def summarize(path, maze, by, listing, with_segments, with_frontiers=False):
     episodes = walks(path)
     if not episodes:
         print(f"{path}: no FR decisions (was it run with RUST_LOG=info,actor=debug?)")
@@ -172,10 +264,12 @@ def summarize(path, maze, by, listing, with_segments):
         print("  " + " ".join(f"({x:.1f},{y:.1f})t{t}{mark.get(s, '?')}" for t, x, y, s in ends))
     if with_segments:
         print_segments(path)
+    if with_frontiers:
+        print_frontiers(path, maze, listing)
 
 
 def main(argv):
-    by, listing, with_segments, paths, task = 500, False, False, [], "antmaze-u"
+    by, listing, with_segments, with_frontiers, paths, task = 500, False, False, False, [], "antmaze-u"
     args = iter(argv)
     for arg in args:
         if arg == "--by":
@@ -186,6 +280,8 @@ def main(argv):
             listing = True
         elif arg == "--segments":
             with_segments = True
+        elif arg == "--frontiers":
+            with_frontiers = True
         elif arg.startswith("-"):
             sys.exit(__doc__)
         else:
@@ -194,7 +290,7 @@ def main(argv):
         sys.exit(__doc__)
     maze = maze_path.for_task(task)
     for path in paths:
-        summarize(path, maze, by, listing, with_segments)
+        summarize(path, maze, by, listing, with_segments, with_frontiers)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Tests of the analysis scripts (fr_trace.py, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
+"""Tests of the analysis scripts (fr_trace.py with --frontiers, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
 count_choice.py, launch_history.py and arm_table.py's notes) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
 
     python3 scripts/test_analysis.py
@@ -96,6 +96,72 @@ class TraceSegments(unittest.TestCase):
         # Episode 1's walk ends at the stuck switch at t=40; the later count decision is dropped.
         self.assertEqual([d[0] for d in walks[1]], [0, 20, 40])
         self.assertEqual(walks[1][-1][3], "Stuck")
+
+
+def assigned(frontier):
+    """The actor's debug line that assigns an FR episode its frontier (φ) and route."""
+    return (
+        f"2026-12-05T12:29:21Z \x1b[34mDEBUG\x1b[0m actor::actor: FR episode assigned "
+        f"\x1b[3mactor\x1b[0m\x1b[2m=\x1b[0m0 frontier=[{frontier[0]}, {frontier[1]}] "
+        f"route=[[0.0, 0.0], [{frontier[0]}, {frontier[1]}]]\n"
+    )
+
+
+class TraceFrontiers(unittest.TestCase):
+    """Where near-frontier switches fire relative to their frontier, on the U maze: s = 0 at
+    (0, 0), 4 at (4, 0), 8 at (8, 0), 12 at (8, 4), 16 at (8, 8), 20 at (4, 8), 24 at (0, 8);
+    the wall between the two arms is the cell row y = 2..6, x < 6."""
+
+    def setUp(self):
+        near = "Some(NearFrontier)"
+        count = "Count { fallback: false }"
+        lines = [
+            # Episode 3: frontier φ (40, 40); it switches at (4, 0.5), s = 4, φ (35, 35).
+            assigned((40.0, 40.0)),
+            decision(3, 0, (0.0, 0.0), (0.0, 0.0), waypoint(2, 2), (10.0, 0.0)),
+            decision(3, 20, (4.0, 0.5), (35.0, 35.0), count, (36.0, 36.0), near),
+            # Episode 4, same frontier: a waypoint decision at (4, 8) (s = 20) with φ (40, 41),
+            # 1 from the frontier, locates it there for episodes 3 and 4; it switches at (8, 6),
+            # s = 14, φ (38, 39) (its φ is √5 ≈ 2.2 from the frontier: (4, 8) is nearer).
+            assigned((40.0, 40.0)),
+            decision(4, 0, (4.0, 8.0), (40.0, 41.0), waypoint(2, 2), (40.0, 40.0)),
+            decision(4, 20, (8.0, 6.0), (38.0, 39.0), count, (39.0, 39.0), near),
+            # Episode 5: a frontier no decision state comes within 4 φ of; a stuck walk
+            # (episode 6, no assigned line) is not a near-frontier switch.
+            assigned((100.0, 100.0)),
+            decision(5, 0, (0.0, 0.0), (0.0, 0.0), waypoint(2, 2), (10.0, 0.0)),
+            decision(5, 20, (8.0, 0.0), (20.0, 20.0), count, (21.0, 21.0), near),
+            decision(6, 0, (0.0, 0.0), (0.0, 0.0), waypoint(2, 2), (10.0, 0.0), "Some(Stuck)"),
+        ]
+        handle = tempfile.NamedTemporaryFile("w", suffix=".log", delete=False)
+        handle.writelines(lines)
+        handle.close()
+        self.path = handle.name
+        self.maze = maze_path.MazePath(U_MAZE)
+
+    def tearDown(self):
+        os.unlink(self.path)
+
+    def test_frontiers_belong_to_the_next_decision(self):
+        self.assertEqual(
+            fr_trace.frontiers(self.path), {3: (40.0, 40.0), 4: (40.0, 40.0), 5: (100.0, 100.0)}
+        )
+
+    def test_switches_through_a_wall(self):
+        rows = fr_trace.frontier_switches(self.path, self.maze)
+        self.assertEqual([r[0] for r in rows], [3, 4, 5])
+        # Episode 3: switch s 4, frontier at (4, 8), s 20; straight |(4, 0.5)-(4, 8)| = 7.5,
+        # along 16: 8.5 shorter, more than a cell (4): through the wall.
+        self.assertEqual(rows[0][1:3], (4.0, 20.0))
+        self.assertAlmostEqual(rows[0][3], 7.5)
+        self.assertTrue(rows[0][4])
+        # Episode 4: switch s 14, frontier s 20; straight |(8, 6)-(4, 8)| = √20 ≈ 4.47, along
+        # 6: 1.53 shorter, round the corner.
+        self.assertEqual(rows[1][1:3], (14.0, 20.0))
+        self.assertAlmostEqual(rows[1][3], 20 ** 0.5)
+        self.assertFalse(rows[1][4])
+        # Episode 5: nearest state φ (20, 20), 113 from the frontier: not located.
+        self.assertEqual(rows[2][1:], (8.0, None, None, False))
 
 
 class CoverageGains(unittest.TestCase):
