@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """When and where frontier-reaching (FR) walks end, from the actor's FR decision trace.
 
-    scripts/fr_trace.py [--task NAME] [--by T] [--list] [--segments] [--frontiers] LOG...
+    scripts/fr_trace.py [--task NAME] [--by T] [--list] [--segments] [--frontiers [--window N]] LOG...
 
 Each LOG is the output of an AntMaze run started with `RUST_LOG=info,actor=debug` (serial mode
 or an actor's log): every FR decision is a line "FR decision episode=E t=T xy=Some([x, y]) ...
@@ -28,12 +28,16 @@ maze: whether a walk stopped across a wall from its frontier (the switch is a Eu
 φ, within `asi.frontier_epsilon`, so it can fire through a wall where a corridor folds back).
 The trace gives the frontier in φ only ("FR episode assigned ... frontier=[..]", the line
 before the episode's first decision); its place in the maze is estimated as the xy of the
-decision state, of any FR episode within ±5 episodes, whose φ is nearest to it, and counts as
+decision state, of any FR episode within ±N episodes (`--window`, default 5; φ is fixed
+between two φ rounds, every 100 episodes by default, so a window inside one such stretch
+locates more without mixing maps), whose φ is nearest to it, and counts as
 located when that φ is within 4 φ units (φ drifts between rounds, so a frontier no walk came
 near is left out). A switch counts as through a wall when the straight line from it to the
 frontier is at least one maze cell shorter than the way along the maze (the difference of
 their s): around one corner it cuts less than that unless both ends lie more than 1.7
-cells from the corner. Standard library only.
+cells from the corner. The same is asked of the stuck walks and their last waypoint (the
+route node k past the nearest one, located the same way): a route that folds back puts it
+across the wall. Standard library only.
 """
 import math
 import re
@@ -174,19 +178,49 @@ def frontiers(path):
     return out
 
 
-def locate(found_all, phi, episode):
-    """(xy, φ offset) of the decision state of episodes episode ± LOCATE_WINDOW whose φ is
-    nearest to `phi`, or None when no such state is within LOCATE_PHI of it."""
+def locate(found_all, phi, episode, window=LOCATE_WINDOW):
+    """(xy, φ offset) of the decision state of episodes episode ± window whose φ is nearest
+    to `phi`, or None when no such state is within LOCATE_PHI of it."""
     best = None
     for (other, _), (_, _, xy, state_phi, _) in found_all.items():
-        if abs(other - episode) <= LOCATE_WINDOW:
+        if abs(other - episode) <= window:
             offset = math.dist(state_phi, phi)
             if best is None or offset < best[1]:
                 best = (xy, offset)
     return best if best is not None and best[1] <= LOCATE_PHI else None
 
 
-def frontier_switches(path, maze):
+def through_wall(maze, xy, target_xy):
+    """(target s, straight distance, through a wall) of a target at `target_xy` seen from `xy`."""
+    target_s = maze.progress(*target_xy)
+    straight = math.dist(xy, target_xy)
+    return target_s, straight, abs(target_s - maze.progress(*xy)) - straight >= maze.size
+
+
+def stuck_waypoints(path, maze, window=LOCATE_WINDOW):
+    """One row per stuck walk: (episode, where it stuck as s, its last waypoint's s or None,
+    straight distance or None, through a wall). The waypoint is located as a frontier is."""
+    found_all = decisions(path)
+    rows = []
+    for episode, walk in sorted(walks(path).items()):
+        t, x, y, switch = walk[-1]
+        if switch != "Stuck":
+            continue
+        at = maze.progress(x, y)
+        goals = [
+            found_all[(episode, t_dec)][4]
+            for t_dec, _, _, _ in walk
+            if (episode, t_dec) in found_all and found_all[(episode, t_dec)][0] == "Waypoint"
+        ]
+        spot = locate(found_all, goals[-1], episode, window) if goals else None
+        if spot is None:
+            rows.append((episode, at, None, None, False))
+        else:
+            rows.append((episode, at, *through_wall(maze, (x, y), spot[0])))
+    return rows
+
+
+def frontier_switches(path, maze, window=LOCATE_WINDOW):
     """One row per near-frontier switch: (episode, switch s, frontier s or None, straight
     distance in metres or None, through a wall)."""
     found_all = decisions(path)
@@ -197,29 +231,28 @@ def frontier_switches(path, maze):
         if switch != "NearFrontier" or episode not in assigned:
             continue
         at = maze.progress(x, y)
-        spot = locate(found_all, assigned[episode], episode)
+        spot = locate(found_all, assigned[episode], episode, window)
         if spot is None:
             rows.append((episode, at, None, None, False))
             continue
-        frontier_s = maze.progress(*spot[0])
-        straight = math.dist((x, y), spot[0])
-        rows.append((episode, at, frontier_s, straight, abs(frontier_s - at) - straight >= maze.size))
+        rows.append((episode, at, *through_wall(maze, (x, y), spot[0])))
     return rows
 
 
-def print_frontiers(path, maze, listing):
-    rows = frontier_switches(path, maze)
+def print_targets(rows, what, target, listing):
+    """One summary line (and with `listing` one entry per row) of frontier_switches or
+    stuck_waypoints rows."""
     located = [r for r in rows if r[2] is not None]
     if not located:
-        print(f"  near-frontier switches: {len(rows)}, none with its frontier located")
+        print(f"  {what}: {len(rows)}, none with its {target} located")
         return
     walls = [r for r in located if r[4]]
     print(
-        f"  near-frontier switches: {len(rows)}, frontier located for {len(located)} "
-        f"(frontier s median {statistics.median(r[2] for r in located):.1f} m, switch s median "
+        f"  {what}: {len(rows)}, {target} located for {len(located)} ({target} s median "
+        f"{statistics.median(r[2] for r in located):.1f} m, walk s median "
         f"{statistics.median(r[1] for r in located):.1f} m); through a wall: {len(walls)}"
         + (
-            f" (switch s median {statistics.median(r[1] for r in walls):.1f} m, frontier s "
+            f" (walk s median {statistics.median(r[1] for r in walls):.1f} m, {target} s "
             f"median {statistics.median(r[2] for r in walls):.1f} m, straight "
             f"{statistics.median(r[3] for r in walls):.1f} m)"
             if walls
@@ -227,17 +260,23 @@ def print_frontiers(path, maze, listing):
         )
     )
     if listing:
-        print("  " + " ".join(
-            f"e{e}:s{at:.0f}->" + ("?" if fs is None else f"{fs:.0f}{'W' if wall else ''}")
-            for e, at, fs, _, wall in rows
+        print("    " + " ".join(
+            f"e{e}:s{at:.0f}->" + ("?" if ts is None else f"{ts:.0f}{'W' if wall else ''}")
+            for e, at, ts, _, wall in rows
         ))
+
+
+def print_frontiers(path, maze, listing, window):
+    rows = frontier_switches(path, maze, window)
+    print_targets(rows, "near-frontier switches", "frontier", listing)
+    print_targets(stuck_waypoints(path, maze, window), "stuck walks", "last waypoint", listing)
 
 
 def median_or_dash(values, fmt="{:.0f}"):
     return fmt.format(statistics.median(values)) if values else "-"
 
 
-def summarize(path, maze, by, listing, with_segments, with_frontiers=False):
+def summarize(path, maze, by, listing, with_segments, with_frontiers=False, window=LOCATE_WINDOW):
     episodes = walks(path)
     if not episodes:
         print(f"{path}: no FR decisions (was it run with RUST_LOG=info,actor=debug?)")
@@ -265,11 +304,12 @@ def summarize(path, maze, by, listing, with_segments, with_frontiers=False):
     if with_segments:
         print_segments(path)
     if with_frontiers:
-        print_frontiers(path, maze, listing)
+        print_frontiers(path, maze, listing, window)
 
 
 def main(argv):
     by, listing, with_segments, with_frontiers, paths, task = 500, False, False, False, [], "antmaze-u"
+    window = LOCATE_WINDOW
     args = iter(argv)
     for arg in args:
         if arg == "--by":
@@ -282,6 +322,8 @@ def main(argv):
             with_segments = True
         elif arg == "--frontiers":
             with_frontiers = True
+        elif arg == "--window":
+            window = int(next(args, "") or sys.exit("--window needs a number of episodes"))
         elif arg.startswith("-"):
             sys.exit(__doc__)
         else:
@@ -290,7 +332,7 @@ def main(argv):
         sys.exit(__doc__)
     maze = maze_path.for_task(task)
     for path in paths:
-        summarize(path, maze, by, listing, with_segments, with_frontiers)
+        summarize(path, maze, by, listing, with_segments, with_frontiers, window)
 
 
 if __name__ == "__main__":

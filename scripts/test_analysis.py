@@ -132,6 +132,16 @@ class TraceFrontiers(unittest.TestCase):
             decision(5, 0, (0.0, 0.0), (0.0, 0.0), waypoint(2, 2), (10.0, 0.0)),
             decision(5, 20, (8.0, 0.0), (20.0, 20.0), count, (21.0, 21.0), near),
             decision(6, 0, (0.0, 0.0), (0.0, 0.0), waypoint(2, 2), (10.0, 0.0), "Some(Stuck)"),
+            # Episode 7: a walk stuck at (4, 0.5), s = 4, whose last waypoint φ (40, 40.5) is
+            # located at (4, 8), s = 20, by episode 4's state: 7.5 m through the wall.
+            decision(7, 0, (2.0, 0.0), (1.0, 1.0), waypoint(3, 3), (40.0, 40.5)),
+            decision(7, 20, (4.0, 0.5), (36.0, 36.0), count, (37.0, 37.0), "Some(Stuck)"),
+            # Episode 12, frontier φ (40, 40) again: 8 episodes from episode 4, so located only
+            # with a window of 8 or more; its switch at (8, 0.5), s = 8.5 (in the corner cell,
+            # nearest the centreline's piece going down).
+            assigned((40.0, 40.0)),
+            decision(12, 0, (0.0, 0.0), (30.0, 30.0), waypoint(2, 2), (35.0, 35.0)),
+            decision(12, 20, (8.0, 0.5), (33.0, 33.0), count, (34.0, 34.0), near),
         ]
         handle = tempfile.NamedTemporaryFile("w", suffix=".log", delete=False)
         handle.writelines(lines)
@@ -144,12 +154,13 @@ class TraceFrontiers(unittest.TestCase):
 
     def test_frontiers_belong_to_the_next_decision(self):
         self.assertEqual(
-            fr_trace.frontiers(self.path), {3: (40.0, 40.0), 4: (40.0, 40.0), 5: (100.0, 100.0)}
+            fr_trace.frontiers(self.path),
+            {3: (40.0, 40.0), 4: (40.0, 40.0), 5: (100.0, 100.0), 12: (40.0, 40.0)},
         )
 
     def test_switches_through_a_wall(self):
         rows = fr_trace.frontier_switches(self.path, self.maze)
-        self.assertEqual([r[0] for r in rows], [3, 4, 5])
+        self.assertEqual([r[0] for r in rows], [3, 4, 5, 12])
         # Episode 3: switch s 4, frontier at (4, 8), s 20; straight |(4, 0.5)-(4, 8)| = 7.5,
         # along 16: 8.5 shorter, more than a cell (4): through the wall.
         self.assertEqual(rows[0][1:3], (4.0, 20.0))
@@ -162,6 +173,28 @@ class TraceFrontiers(unittest.TestCase):
         self.assertFalse(rows[1][4])
         # Episode 5: nearest state φ (20, 20), 113 from the frontier: not located.
         self.assertEqual(rows[2][1:], (8.0, None, None, False))
+        # Episode 12 with the default window (±5: episodes 7-17): the nearest state is episode
+        # 7's φ (36, 36), 5.7 from the frontier: not located.
+        self.assertEqual(rows[3][1:], (8.5, None, None, False))
+
+    def test_a_wider_window_locates_more(self):
+        rows = fr_trace.frontier_switches(self.path, self.maze, window=8)
+        # Episode 12 now sees episode 4's φ (40, 41): frontier at (4, 8), s 20; straight
+        # |(8, 0.5)-(4, 8)| = √72.25 = 8.5, along 11.5: 3 shorter, less than a cell.
+        self.assertEqual(rows[3][1:3], (8.5, 20.0))
+        self.assertAlmostEqual(rows[3][3], 8.5)
+        self.assertFalse(rows[3][4])
+
+    def test_stuck_walks_and_their_last_waypoint(self):
+        rows = fr_trace.stuck_waypoints(self.path, self.maze)
+        # Episode 6: stuck at (0, 0), s 0; its waypoint φ (10, 0) is 10 from the nearest state
+        # (φ (0, 0)): not located. Episode 7: stuck at s 4, waypoint at (4, 8), s 20, 7.5 m
+        # away in a straight line: through the wall.
+        self.assertEqual([r[0] for r in rows], [6, 7])
+        self.assertEqual(rows[0][1:], (0.0, None, None, False))
+        self.assertEqual(rows[1][1:3], (4.0, 20.0))
+        self.assertAlmostEqual(rows[1][3], 7.5)
+        self.assertTrue(rows[1][4])
 
 
 class CoverageGains(unittest.TestCase):
