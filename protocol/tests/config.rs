@@ -285,6 +285,12 @@ fn every_shipped_config_loads_and_validates() {
                 "{}: run.name should match the file name",
                 path.display()
             );
+            assert!(
+                config.notes().is_empty(),
+                "{}: {:?}",
+                path.display(),
+                config.notes()
+            );
             names.push(stem);
         }
     }
@@ -354,6 +360,27 @@ fn the_1000_step_config_is_the_defaults_with_every_episode_count_halved() {
         step.from_episode = half(step.from_episode);
     }
     assert_eq!(config, expected);
+}
+
+#[test]
+fn fr_before_the_first_phi_round_is_noted_not_refused() {
+    assert!(Config::default().notes().is_empty());
+    let early = Config::load(None, &sets(&["asi.fr_start_episode=60"])).expect("valid");
+    let notes = early.notes();
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(
+        notes[0].contains("asi.fr_start_episode = 60")
+            && notes[0].contains("encoder.first_round_episode = 100"),
+        "{notes:?}"
+    );
+    // At the first round, or with FR off, there is nothing to note.
+    for ok in [
+        &["asi.fr_start_episode=100"][..],
+        &["asi.fr_start_episode=60", "asi.frontier_reaching=false"][..],
+    ] {
+        let config = Config::load(None, &sets(ok)).expect("valid");
+        assert!(config.notes().is_empty(), "{ok:?}: {:?}", config.notes());
+    }
 }
 
 #[test]

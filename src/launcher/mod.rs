@@ -337,6 +337,9 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
             Some(path) => format!("loading config {}", path.display()),
             None => "loading the default config (AntMaze-U)".to_owned(),
         })?;
+    for note in config.notes() {
+        eprintln!("note: {note}");
+    }
     let run_dir = args.run_dir.clone().unwrap_or_else(|| config.run.run_dir());
     // Locked before anything in it is read or moved: a running launch keeps its folder.
     let mut lock = RunLock::acquire(&run_dir)?;

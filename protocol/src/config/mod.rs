@@ -117,4 +117,22 @@ impl Config {
         self.transport.check(&mut c, self.run.n_actors);
         c.finish()
     }
+
+    /// Settings that are valid but probably not what was meant, one sentence each (the
+    /// launcher prints them as notes); empty for the shipped configs.
+    pub fn notes(&self) -> Vec<String> {
+        let mut notes = Vec::new();
+        if self.asi.frontier_reaching
+            && self.asi.fr_start_episode < self.encoder.first_round_episode
+        {
+            notes.push(format!(
+                "asi.fr_start_episode = {} is before encoder.first_round_episode = {}: until the \
+                 first φ round there is no graph built with a trained φ (none in a fresh run, \
+                 one from the untrained φ after a resume), so FR episodes before it find no \
+                 frontier or take the start as one",
+                self.asi.fr_start_episode, self.encoder.first_round_episode
+            ));
+        }
+        notes
+    }
 }
