@@ -39,6 +39,7 @@ cells from the corner. The same is asked of the stuck walks and their last waypo
 route node k past the nearest one, located the same way): a route that folds back puts it
 across the wall. Standard library only.
 """
+import functools
 import math
 import re
 import statistics
@@ -62,6 +63,7 @@ def matches(path, pattern):
                 yield found
 
 
+@functools.lru_cache(maxsize=4)  # --frontiers reads each log through both; callers only read
 def walks(path):
     """{episode: [(t, x, y, switch or None), ...]} up to and including the first switch."""
     episodes = {}
@@ -86,6 +88,7 @@ BIN = 4.0  # width of the starting-distance bins, φ units
 LAST_BIN = 20.0  # everything from here on is one bin
 
 
+@functools.lru_cache(maxsize=4)  # --frontiers reads each log through both; callers only read
 def decisions(path):
     """{(episode, t): (choice, route index or None, xy, φ, subgoal)} of every FR decision."""
     found_all = {}
