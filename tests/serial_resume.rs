@@ -27,7 +27,11 @@
 //! the equality is not vacuous, that the prefixes continued with FR (SI) off part from the
 //! reference on the first metrics line after FR's (SI's) start. Checked by hand to fail when
 //! the SI buffer is not filled with SI off (the fork starts SI with an empty buffer) and when
-//! an FR-on actor draws its FR number while `fr_prob` is 0.
+//! an FR-on actor draws its FR number while `fr_prob` is 0. A fork at FR's start before the
+//! first φ round (FR set to start early, the first round moved to 8) equals its uninterrupted
+//! run too: the graph-service's checkpoint keeps the learner's initial φ (version 0), whose
+//! graph is empty (it failed with the φ dropped on restore: the fork's first broadcast
+//! re-mapped the stored states into a 4-node graph of the untrained φ).
 
 mod common;
 
@@ -643,6 +647,68 @@ fn a_resume_between_phi_re_maps_keeps_the_graph_of_the_last_re_map() {
         &expected,
         &lines(&split.join("metrics.jsonl")),
     );
+}
+
+/// Where [`a_fork_before_the_first_phi_round_keeps_the_graph_of_the_initial_phi`] forks, at
+/// FR's start, and where its first φ round falls.
+const PRE_ROUND_FORK: u64 = 2;
+const LATE_FIRST_ROUND: u64 = 8;
+
+#[test]
+fn a_fork_before_the_first_phi_round_keeps_the_graph_of_the_initial_phi() {
+    // Until the first φ round the learner broadcasts its initial φ (version 0), which reached
+    // the graph-service while its store was empty: its graph has no node, and an FR draw finds
+    // no route. A fork resumed from a checkpoint of that time must keep this φ. (The
+    // graph-service's checkpoint once dropped φ 0 as "no φ", so the fork's first broadcast
+    // re-mapped every stored state and built a graph of the untrained φ, whose frontiers the
+    // FR episodes then walked to.)
+    let tmp = TempDir::new("pre-round-fork");
+    let flags = |fr_on: bool| {
+        let mut flags = arm_flags(fr_on, true);
+        for set in [
+            format!("asi.fr_start_episode={PRE_ROUND_FORK}"),
+            "asi.fr_prob_schedule=[{ from_episode = 0, p = 1.0 }]".to_owned(),
+            format!("encoder.first_round_episode={LATE_FIRST_ROUND}"),
+        ] {
+            flags.extend(["--set".to_owned(), set]);
+        }
+        flags
+    };
+    let (reference, prefix, forked) = (
+        tmp.0.join("reference"),
+        tmp.0.join("prefix"),
+        tmp.0.join("forked"),
+    );
+    launch(
+        &reference,
+        LATE_FIRST_ROUND,
+        &flags(true),
+        false,
+        "reference",
+    );
+    launch(
+        &prefix,
+        PRE_ROUND_FORK,
+        &flags(false),
+        false,
+        "FR-off prefix",
+    );
+    fork(&prefix, &forked);
+    launch(&forked, LATE_FIRST_ROUND, &flags(true), true, "FR fork");
+    let expected = lines(&reference.join("metrics.jsonl"));
+    assert_same_lines(
+        &format!("metrics.jsonl, FR forked in at {PRE_ROUND_FORK}"),
+        &expected,
+        &lines(&forked.join("metrics.jsonl")),
+    );
+    // Not vacuous: the two episodes that started after 4 had ended (each actor's third) drew
+    // FR (p = 1) before the φ round and found no route in the empty graph.
+    let line_at = |episodes: u64| &expected[first_line_after(&expected, episodes) - 1];
+    let six = line_at(6);
+    assert_eq!(episodes_of(six), 6, "{six}");
+    assert_eq!(metric_sum(six, "/actor/fr/no_route"), 2.0, "{six}");
+    assert_eq!(metric_sum(six, "graph-service/graph/nodes"), 0.0, "{six}");
+    assert_eq!(metric_sum(six, "learner/phi/version"), 0.0, "{six}");
 }
 
 /// Episodes of the forked runs: past self-imitation's start in the smoke config, with an

@@ -93,7 +93,8 @@ pub struct Manifest {
     pub sequence: u64,
     /// States in the store when it was written.
     pub stored_steps: u64,
-    /// φ version held when it was written (0: none yet).
+    /// φ version held when it was written: 0 for none and for the learner's initial φ alike
+    /// (`phi.safetensors` is listed exactly when a φ is held).
     pub phi_version: u64,
     /// Every other file of the folder.
     pub files: Vec<FileEntry>,
@@ -212,7 +213,11 @@ impl GraphService {
         service.store = store;
         restore_maps(&mut service, file(MAPS_FILE)?)
             .map_err(|p| corrupt(&path.join(MAPS_FILE), p))?;
-        if state.phi_version > 0 {
+        // φ version 0 is the learner's initial φ, a φ like any other: whether one is held is
+        // whether its tensors were saved (a φ-0 service restored without it would re-map every
+        // stored state at the next broadcast of φ 0, which the saved one ignored).
+        let phi_saved = manifest.files.iter().any(|f| f.name == PHI_FILE);
+        if phi_saved || state.phi_version > 0 {
             let phi = service
                 .loader
                 .restore(file(PHI_FILE)?, PhiVersion(state.phi_version))

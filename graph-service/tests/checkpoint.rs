@@ -175,6 +175,36 @@ fn a_service_without_weights_round_trips_and_keeps_no_phi_file() {
     remove(&dir);
 }
 
+#[test]
+fn a_service_holding_the_initial_phi_0_restores_it_and_ignores_its_rebroadcast() {
+    let dir = scratch("phi-0");
+    let config = config();
+    let mut s = service(&config);
+    let (h, p) = weights(&actor_side_params(&config, 2.0), 0);
+    s.load_weights(&h, &p).unwrap();
+    ingest_episode(&mut s, 0, 0, &[at(0, 0), at(1, 0), at(2, 0)]);
+    let ckpt = s.save(&dir).unwrap();
+    assert_eq!(ckpt.manifest.phi_version, 0);
+    assert!(ckpt
+        .manifest
+        .files
+        .iter()
+        .any(|f| f.name == "phi.safetensors"));
+    let (mut restored, _) = GraphService::restore(&ckpt.path, &config, dims()).unwrap();
+    // The learner broadcasts φ 0 until its first φ round. It is not newer than the φ held, so
+    // neither service re-maps its states (φ = 2·xy would move them) or rebuilds its graph.
+    let versions = (s.stats().graph_version, restored.stats().graph_version);
+    s.load_weights(&h, &p).unwrap();
+    restored.load_weights(&h, &p).unwrap();
+    assert_eq!(
+        (s.stats().graph_version, restored.stats().graph_version),
+        versions
+    );
+    assert_eq!(restored.store(), s.store());
+    assert_eq!(restored.counts(), s.counts());
+    remove(&dir);
+}
+
 /// Saves `busy_service` into a fresh folder; returns the folder and checkpoint path.
 fn saved(name: &str) -> (PathBuf, PathBuf) {
     let dir = scratch(name);

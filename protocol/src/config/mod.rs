@@ -127,9 +127,9 @@ impl Config {
         {
             notes.push(format!(
                 "asi.fr_start_episode = {} is before encoder.first_round_episode = {}: until the \
-                 first φ round there is no graph built with a trained φ (none in a fresh run, \
-                 one from the untrained φ after a resume), so FR episodes before it find no \
-                 frontier or take the start as one",
+                 first φ round there is no graph built with a trained φ (an empty one in a \
+                 fresh or serially resumed run, one of the untrained φ after a graph-service \
+                 restart), so FR episodes before it find no frontier or take the start as one",
                 self.asi.fr_start_episode, self.encoder.first_round_episode
             ));
         }
