@@ -582,6 +582,46 @@ fn a_serial_checkpoint_of_other_actors_or_a_corrupt_one_is_refused_with_a_clear_
     }
 }
 
+/// Rewrites every manifest under `dir` as a format-1 build wrote it: `format_version` 1 and
+/// each file's word-wise FNV-1a ([`ckpt::fingerprint`]) as its checksum. Returns how many.
+fn as_format_1(dir: &Path) -> usize {
+    let mut rewritten = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            rewritten += as_format_1(&path);
+            continue;
+        }
+        if path.file_name().unwrap() != "manifest.json" {
+            continue;
+        }
+        let mut manifest: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!(manifest["format_version"], 2, "{}", path.display());
+        manifest["format_version"] = 1.into();
+        for file in manifest["files"].as_array_mut().unwrap() {
+            let bytes = std::fs::read(dir.join(file["name"].as_str().unwrap())).unwrap();
+            file["checksum"] = format!("{:016x}", ckpt::fingerprint(&bytes)).into();
+        }
+        std::fs::write(&path, serde_json::to_vec_pretty(&manifest).unwrap()).unwrap();
+        rewritten += 1;
+    }
+    rewritten
+}
+
+#[test]
+fn a_run_whose_checkpoints_are_of_format_1_resumes_bit_exactly() {
+    let tmp = TempDir::new("format-1");
+    let dir = tmp.0.join("run");
+    launch(&dir, 2, &[], false, "the first launch");
+    // The serial, learner and graph-service parts, each as the build before format 2 wrote it.
+    let rewritten = as_format_1(&dir.join("checkpoints"));
+    assert!(rewritten >= 3, "{rewritten} manifests");
+    launch(&dir, 4, &[], true, "the resume from format 1");
+    let history = history(&dir);
+    assert_launch(&history, 1, Some(2), Some(("budget_reached", 4)));
+}
+
 #[test]
 fn a_run_ended_mid_episode_by_its_step_budget_resumes_and_says_it_is_not_exact() {
     let tmp = TempDir::new("mid-episode");

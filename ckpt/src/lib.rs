@@ -8,6 +8,8 @@
 //!   it, then renames it; a folder named `<prefix>N` is complete. A temporary folder left by an
 //!   interrupted write is never read, and is removed by the next write of the same number.
 //! - Checked: [`read_checked`] refuses a file whose size or checksum differs from its entry.
+//!   The checksum is CRC-64 ([`checksum`]) in the current manifest formats; format 1 of every
+//!   manifest listed word-wise FNV-1a ([`fingerprint`]), which is still read ([`Checksum`]).
 //! - Rotation: after a commit only the newest `keep` checkpoints remain.
 //!
 //! The safetensors helpers write string metadata as one sorted JSON entry ([`META_KEY`]), so
@@ -104,12 +106,12 @@ pub struct FileEntry {
     pub name: String,
     /// Size in bytes.
     pub bytes: u64,
-    /// [`checksum`] of the contents, 16 hex digits.
+    /// [`checksum`] of the contents (16 hex digits); [`fingerprint`] in a format-1 manifest.
     pub checksum: String,
 }
 
 impl FileEntry {
-    /// The entry of a file `name` holding `bytes`.
+    /// The entry of a file `name` holding `bytes`, with the current [`checksum`].
     pub fn of(name: &str, bytes: &[u8]) -> Self {
         Self {
             name: name.to_owned(),
@@ -119,9 +121,119 @@ impl FileEntry {
     }
 }
 
-/// 64-bit FNV-1a over the little-endian 8-byte words of `bytes` (then the remaining bytes one
-/// by one): a fast check against truncation and bit rot, not a cryptographic hash.
+/// Which function a manifest's file checksums were computed with, by the manifest's format
+/// version: the learner's, the graph-service's and the serial checkpoints all wrote
+/// [`Checksum::Fnv1aWords`] in format 1 and write [`Checksum::Crc64`] from format 2 on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Checksum {
+    /// [`fingerprint`]: format 1, read only. It misses some two-bit errors (flipping the top
+    /// bit of any two 8-byte words cancels), which is why format 2 replaced it.
+    Fnv1aWords,
+    /// [`checksum`]: CRC-64/XZ, format 2 on.
+    Crc64,
+}
+
+impl Checksum {
+    /// The checksum of a manifest of `format_version`, written by a reader whose own format is
+    /// `current` (a format from 2 on, which writes CRC-64): `None` for a version it cannot
+    /// read (newer, or an unknown one).
+    pub fn of_format(format_version: u32, current: u32) -> Option<Self> {
+        match format_version {
+            1 => Some(Self::Fnv1aWords),
+            v if v == current => Some(Self::Crc64),
+            _ => None,
+        }
+    }
+
+    /// The checksum of `bytes`.
+    pub fn of(self, bytes: &[u8]) -> u64 {
+        match self {
+            Self::Fnv1aWords => fingerprint(bytes),
+            Self::Crc64 => checksum(bytes),
+        }
+    }
+}
+
+/// The reflected ECMA-182 polynomial of CRC-64/XZ.
+const CRC64_POLY: u64 = 0xc96c_5795_d787_0f42;
+
+/// Slicing-by-16 tables of CRC-64/XZ: `T[0]` is the byte-wise table, `T[j][b]` the CRC of
+/// byte `b` followed by `j` zero bytes.
+static CRC64_TABLES: [[u64; 256]; 16] = crc64_tables();
+
+const fn crc64_tables() -> [[u64; 256]; 16] {
+    let mut tables = [[0u64; 256]; 16];
+    let mut i = 0;
+    while i < 256 {
+        let mut crc = i as u64;
+        let mut bit = 0;
+        while bit < 8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ CRC64_POLY
+            } else {
+                crc >> 1
+            };
+            bit += 1;
+        }
+        tables[0][i] = crc;
+        i += 1;
+    }
+    let mut i = 0;
+    while i < 256 {
+        let mut j = 1;
+        while j < 16 {
+            let prev = tables[j - 1][i];
+            tables[j][i] = (prev >> 8) ^ tables[0][(prev & 0xff) as usize];
+            j += 1;
+        }
+        i += 1;
+    }
+    tables
+}
+
+/// CRC-64/XZ of `bytes` (the check of `.xz` files; ECMA-182 polynomial, reflected, initial
+/// value and final XOR all ones): the file checksum of checkpoint manifests. It detects every
+/// error of one or two bits and every burst of up to 64 bits, unlike [`fingerprint`].
 pub fn checksum(bytes: &[u8]) -> u64 {
+    let t = &CRC64_TABLES;
+    let mut crc = !0u64;
+    let blocks = bytes.chunks_exact(16);
+    let tail = blocks.remainder();
+    for block in blocks {
+        let (lo, hi) = block.split_at(8);
+        let lo = crc ^ u64::from_le_bytes(lo.try_into().expect("8 bytes"));
+        let hi = u64::from_le_bytes(hi.try_into().expect("8 bytes"));
+        let byte = |v: u64, k: u32| ((v >> (8 * k)) & 0xff) as usize;
+        crc = t[15][byte(lo, 0)]
+            ^ t[14][byte(lo, 1)]
+            ^ t[13][byte(lo, 2)]
+            ^ t[12][byte(lo, 3)]
+            ^ t[11][byte(lo, 4)]
+            ^ t[10][byte(lo, 5)]
+            ^ t[9][byte(lo, 6)]
+            ^ t[8][byte(lo, 7)]
+            ^ t[7][byte(hi, 0)]
+            ^ t[6][byte(hi, 1)]
+            ^ t[5][byte(hi, 2)]
+            ^ t[4][byte(hi, 3)]
+            ^ t[3][byte(hi, 4)]
+            ^ t[2][byte(hi, 5)]
+            ^ t[1][byte(hi, 6)]
+            ^ t[0][byte(hi, 7)];
+    }
+    for &b in tail {
+        crc = t[0][((crc ^ u64::from(b)) & 0xff) as usize] ^ (crc >> 8);
+    }
+    !crc
+}
+
+/// 64-bit FNV-1a over the little-endian 8-byte words of `bytes` (then the remaining bytes one
+/// by one), XORed with the length: a fast fingerprint for telling contents apart (the config
+/// fingerprint of learner checkpoints, the config and binary of `launches.jsonl`), and the
+/// file checksum of format-1 manifests. Not for detecting damage: a flip of bit k of a word
+/// only reaches bits k and up of the result, so flipping the top bit of two words cancels.
+/// Its values must never change, or recorded fingerprints stop matching.
+pub fn fingerprint(bytes: &[u8]) -> u64 {
     const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
     const PRIME: u64 = 0x0000_0100_0000_01b3;
     let mut hash = OFFSET;
@@ -285,12 +397,14 @@ pub fn read_manifest<M: DeserializeOwned>(dir: &Path, name: &str) -> Result<M, F
     serde_json::from_slice(&bytes).map_err(|e| corrupt(&path, format!("unreadable manifest: {e}")))
 }
 
-/// Every file of `files` in `dir`, checked against its size and checksum, by name;
-/// `manifest` (the manifest's path) is named when an entry is not a plain file name.
+/// Every file of `files` in `dir`, checked against its size and its checksum (computed with
+/// `sum`, the manifest format's [`Checksum`]), by name; `manifest` (the manifest's path) is
+/// named when an entry is not a plain file name.
 pub fn read_checked(
     dir: &Path,
     files: &[FileEntry],
     manifest: &Path,
+    sum: Checksum,
 ) -> Result<HashMap<String, Vec<u8>>, FileError> {
     let mut out = HashMap::new();
     for entry in files {
@@ -312,11 +426,11 @@ pub fn read_checked(
                 ),
             ));
         }
-        let sum = format!("{:016x}", checksum(&bytes));
-        if sum != entry.checksum {
+        let found = format!("{:016x}", sum.of(&bytes));
+        if found != entry.checksum {
             return Err(corrupt(
                 &path,
-                format!("checksum {sum}, the manifest says {}", entry.checksum),
+                format!("checksum {found}, the manifest says {}", entry.checksum),
             ));
         }
         out.insert(entry.name.clone(), bytes);
@@ -502,16 +616,103 @@ mod tests {
         dir
     }
 
-    #[test]
-    fn checksum_changes_with_any_flipped_byte_and_with_length() {
-        let bytes: Vec<u8> = (0..37u8).collect();
-        let sum = checksum(&bytes);
-        for i in 0..bytes.len() {
-            let mut flipped = bytes.clone();
-            flipped[i] ^= 0x10;
-            assert_ne!(checksum(&flipped), sum, "byte {i}");
+    /// The 1,003-byte test buffer of the reference values below.
+    fn test_buffer() -> Vec<u8> {
+        (0..1003u64)
+            .map(|i| ((i * i * 31 + 7 * i + 3) % 251) as u8)
+            .collect()
+    }
+
+    /// CRC-64/XZ one bit at a time, straight from its definition.
+    fn crc64_bitwise(bytes: &[u8]) -> u64 {
+        let mut crc = !0u64;
+        for &b in bytes {
+            crc ^= u64::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 {
+                    (crc >> 1) ^ CRC64_POLY
+                } else {
+                    crc >> 1
+                };
+            }
         }
-        assert_ne!(checksum(&bytes[..36]), sum);
+        !crc
+    }
+
+    #[test]
+    fn checksum_is_crc64_xz() {
+        // The CRC catalogue's check value of CRC-64/XZ, and the check xz 5 (liblzma) stores
+        // for the test buffer (`xz --check=crc64`, read back with `xz --robot -lvv`).
+        assert_eq!(checksum(b"123456789"), 0x995d_c9bb_df19_39fa);
+        assert_eq!(checksum(&test_buffer()), 0xce81_d968_d13b_2eb2);
+        assert_eq!(checksum(&[]), 0);
+        // Slicing-by-16 against the definition for every split into 16-byte blocks and a tail.
+        let buffer = test_buffer();
+        for len in 0..=40 {
+            assert_eq!(
+                checksum(&buffer[..len]),
+                crc64_bitwise(&buffer[..len]),
+                "{len}"
+            );
+        }
+    }
+
+    #[test]
+    fn checksum_catches_every_one_and_two_bit_error_where_the_fingerprint_misses_some() {
+        let bytes = &test_buffer()[..64];
+        let sum = checksum(bytes);
+        let flip = |bits: &[usize]| {
+            let mut flipped = bytes.to_vec();
+            for &bit in bits {
+                flipped[bit / 8] ^= 1 << (bit % 8);
+            }
+            flipped
+        };
+        for i in 0..bytes.len() * 8 {
+            assert_ne!(checksum(&flip(&[i])), sum, "bit {i}");
+            for j in i + 1..bytes.len() * 8 {
+                assert_ne!(checksum(&flip(&[i, j])), sum, "bits {i} and {j}");
+            }
+        }
+        assert_ne!(checksum(&bytes[..63]), sum);
+        // Format 1's checksum: the top bits of words 0 and 3 (bits 63 and 255) cancel.
+        assert_eq!(fingerprint(&flip(&[63, 255])), fingerprint(bytes));
+        assert_ne!(checksum(&flip(&[63, 255])), sum);
+    }
+
+    #[test]
+    fn the_fingerprint_keeps_its_values() {
+        // Computed by format 1's function (word-wise FNV-1a XOR length) as recorded in
+        // existing checkpoints and launch records; a change here orphans all of them.
+        assert_eq!(fingerprint(b"123456789"), 0xa6cd_6bd6_7708_1ab6);
+        assert_eq!(fingerprint(&test_buffer()), 0x014e_c1e7_b91c_4593);
+        assert_eq!(Checksum::Fnv1aWords.of(b"123456789"), 0xa6cd_6bd6_7708_1ab6);
+        assert_eq!(Checksum::Crc64.of(b"123456789"), 0x995d_c9bb_df19_39fa);
+    }
+
+    #[test]
+    fn each_format_reads_with_its_checksum() {
+        assert_eq!(Checksum::of_format(1, 2), Some(Checksum::Fnv1aWords));
+        assert_eq!(Checksum::of_format(2, 2), Some(Checksum::Crc64));
+        assert_eq!(Checksum::of_format(3, 2), None);
+        assert_eq!(Checksum::of_format(0, 2), None);
+        // A format-1 entry (fingerprint) reads with its own checksum, not with format 2's.
+        let dir = scratch("format1");
+        let folder = TmpFolder::begin(&dir, "ckpt-", ".tmp-ckpt-").unwrap();
+        let path = folder.commit("manifest.json", b"{}", 2).unwrap();
+        fs::write(path.join("a.bin"), b"0123456789").unwrap();
+        let entry = FileEntry {
+            name: "a.bin".to_owned(),
+            bytes: 10,
+            checksum: format!("{:016x}", fingerprint(b"0123456789")),
+        };
+        let manifest = path.join("manifest.json");
+        let files = [entry];
+        let read = read_checked(&path, &files, &manifest, Checksum::Fnv1aWords).unwrap();
+        assert_eq!(read["a.bin"], b"0123456789");
+        let err = read_checked(&path, &files, &manifest, Checksum::Crc64).unwrap_err();
+        assert!(err.to_string().contains("checksum"), "{err}");
+        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -523,7 +724,8 @@ mod tests {
             folder.add("a.bin", &[seq as u8; 5]).unwrap();
             let files = folder.files().to_vec();
             let path = folder.commit("manifest.json", b"{}", 2).unwrap();
-            let read = read_checked(&path, &files, &path.join("manifest.json")).unwrap();
+            let read =
+                read_checked(&path, &files, &path.join("manifest.json"), Checksum::Crc64).unwrap();
             assert_eq!(read["a.bin"], vec![seq as u8; 5]);
         }
         let names: Vec<_> = list(&dir, "ckpt-")
@@ -557,10 +759,12 @@ mod tests {
         let files = folder.files().to_vec();
         let path = folder.commit("manifest.json", b"{}", 2).unwrap();
         fs::write(path.join("a.bin"), b"0123456780").unwrap();
-        let err = read_checked(&path, &files, &path.join("manifest.json")).unwrap_err();
+        let err =
+            read_checked(&path, &files, &path.join("manifest.json"), Checksum::Crc64).unwrap_err();
         assert!(err.to_string().contains("checksum"), "{err}");
         fs::write(path.join("a.bin"), b"01234").unwrap();
-        let err = read_checked(&path, &files, &path.join("manifest.json")).unwrap_err();
+        let err =
+            read_checked(&path, &files, &path.join("manifest.json"), Checksum::Crc64).unwrap_err();
         assert!(err.to_string().contains("truncated"), "{err}");
         fs::remove_dir_all(&dir).unwrap();
     }

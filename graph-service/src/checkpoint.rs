@@ -31,7 +31,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 pub use ckpt::FileError;
-use ckpt::{array, meta, Array, FileEntry, TmpFolder};
+use ckpt::{array, meta, Array, Checksum, FileEntry, TmpFolder};
 use protocol::{ActorId, Config, EpisodeId, LatentPoint, PhiVersion, PROTOCOL_VERSION};
 use rand_pcg::Pcg64;
 use safetensors::SafeTensors;
@@ -43,8 +43,9 @@ use crate::hess::{HessMaps, HessParts};
 use crate::service::GraphService;
 use crate::store::{StoreCounters, Trajectory, TrajectoryHead, TrajectoryStore};
 
-/// Version of the checkpoint format; a checkpoint of another version is refused.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of the checkpoint format; a checkpoint of another version is refused, but for
+/// format 1 (the same files, checksummed with [`ckpt::fingerprint`]; see [`ckpt::Checksum`]).
+pub const FORMAT_VERSION: u32 = 2;
 /// Name of the manifest inside a checkpoint folder.
 pub const MANIFEST: &str = "manifest.json";
 /// Checkpoints kept (older ones are removed after a new one is written).
@@ -198,8 +199,8 @@ impl GraphService {
         let mut service = GraphService::new(config, dims, config.run.seed)?;
         let manifest_path = path.join(MANIFEST);
         let manifest: Manifest = ckpt::read_manifest(path, MANIFEST)?;
-        check_compatible(&service, &manifest, &manifest_path)?;
-        let blobs = ckpt::read_checked(path, &manifest.files, &manifest_path)?;
+        let sum = check_compatible(&service, &manifest, &manifest_path)?;
+        let blobs = ckpt::read_checked(path, &manifest.files, &manifest_path, sum)?;
         let file = |name: &str| {
             blobs
                 .get(name)
@@ -286,22 +287,23 @@ impl GraphService {
     }
 }
 
-/// Versions and shape of `manifest` against this service's.
+/// Versions and shape of `manifest` against this service's; the checksum its format lists
+/// files with.
 fn check_compatible(
     service: &GraphService,
     manifest: &Manifest,
     path: &Path,
-) -> Result<(), CheckpointError> {
+) -> Result<Checksum, CheckpointError> {
     let differ = |what: &str, expected: String, found: String| -> CheckpointError {
         ckpt::incompatible(path, what, expected, found).into()
     };
-    if manifest.format_version != FORMAT_VERSION {
+    let Some(sum) = Checksum::of_format(manifest.format_version, FORMAT_VERSION) else {
         return Err(differ(
             "format version",
-            FORMAT_VERSION.to_string(),
+            format!("{FORMAT_VERSION} (or 1)"),
             manifest.format_version.to_string(),
         ));
-    }
+    };
     if manifest.protocol_version != PROTOCOL_VERSION {
         return Err(differ(
             "protocol version",
@@ -324,7 +326,7 @@ fn check_compatible(
             manifest.shape[key].clone(),
         ));
     }
-    Ok(())
+    Ok(sum)
 }
 
 /// `store.safetensors`: see the module doc.

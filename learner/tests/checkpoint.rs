@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use common::*;
 use learner::learner::checkpoint::{
-    checksum, latest_checkpoint, CheckpointError, Manifest, MANIFEST,
+    checksum, latest_checkpoint, CheckpointError, Checksum, Manifest, MANIFEST,
 };
 use learner::Learner;
 
@@ -469,5 +469,77 @@ fn a_checkpoint_written_before_the_gradient_norms_existed_loads_with_them_at_zer
     assert_eq!(
         restored_rest, original_rest,
         "the other statistics come back"
+    );
+}
+
+/// Flips the top bit of the last two whole 8-byte words of `file`: a two-bit error that the
+/// word-wise FNV-1a of format 1 cannot see (both flips reach only the top bit of its state and
+/// cancel), returned as the bytes before and after.
+fn flip_top_bits_of_two_words(file: &Path) -> (Vec<u8>, Vec<u8>) {
+    let before = fs::read(file).unwrap();
+    let mut after = before.clone();
+    let end = before.len() / 8 * 8;
+    after[end - 9] ^= 0x80;
+    after[end - 1] ^= 0x80;
+    fs::write(file, &after).unwrap();
+    (before, after)
+}
+
+#[test]
+fn a_two_bit_error_that_the_format_1_checksum_misses_is_refused() {
+    let (_dir, ckpt) = saved("two-bits");
+    let file = ckpt.join("replay_low.safetensors");
+    let (before, after) = flip_top_bits_of_two_words(&file);
+    assert_ne!(before, after);
+    // The old checksum would have let these contents through as the saved ones.
+    assert_eq!(
+        Checksum::Fnv1aWords.of(&before),
+        Checksum::Fnv1aWords.of(&after)
+    );
+    let err = refused(&ckpt, &config());
+    assert!(
+        err.contains("replay_low.safetensors") && err.contains("checksum"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_format_1_checkpoint_still_restores_and_its_checksums_still_guard_it() {
+    let (_dir, ckpt) = saved("format-1");
+    let current = read_manifest(&ckpt);
+    assert_eq!(current.format_version, 2);
+    // The manifest as a format-1 build wrote it: the same files, word-wise FNV-1a sums.
+    let mut old = current.clone();
+    old.format_version = 1;
+    for entry in &mut old.files {
+        let bytes = fs::read(ckpt.join(&entry.name)).unwrap();
+        entry.checksum = format!("{:016x}", Checksum::Fnv1aWords.of(&bytes));
+        assert_ne!(entry.checksum, format!("{:016x}", checksum(&bytes)));
+    }
+    fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&old).unwrap()).unwrap();
+    let (restored, info) = Learner::restore_checkpoint(&config(), DIMS, &ckpt).unwrap();
+    assert_eq!(info.manifest, old);
+    // It is the saved learner: written again (as format 2), every file is the same.
+    let again = restored
+        .save_checkpoint(&config(), &scratch("format-1-again"))
+        .unwrap();
+    assert_eq!(again.manifest.files, current.files);
+
+    // A format-1 manifest is checked with its own function: CRC sums under format 1 do not
+    // match, and a flipped byte is still caught.
+    let mut mixed = current.clone();
+    mixed.format_version = 1;
+    fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&mixed).unwrap()).unwrap();
+    assert!(refused(&ckpt, &config()).contains("checksum"));
+    fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&old).unwrap()).unwrap();
+    let file = ckpt.join("replay_high.safetensors");
+    let mut bytes = fs::read(&file).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x04;
+    fs::write(&file, bytes).unwrap();
+    let err = refused(&ckpt, &config());
+    assert!(
+        err.contains("replay_high.safetensors") && err.contains("checksum"),
+        "{err}"
     );
 }

@@ -471,10 +471,11 @@ fn resume_point(
     })?;
     let fingerprint = config_fingerprint(config);
     let versions = (manifest.format_version, manifest.protocol_version);
-    if versions != (FORMAT_VERSION, protocol::PROTOCOL_VERSION) {
+    let readable = ckpt::Checksum::of_format(manifest.format_version, FORMAT_VERSION).is_some();
+    if !readable || manifest.protocol_version != protocol::PROTOCOL_VERSION {
         bail!(
-            "checkpoint {} has format/protocol version {versions:?}, this build writes ({FORMAT_VERSION}, {}); \
-             start over with --restart",
+            "checkpoint {} has format/protocol version {versions:?}, this build reads \
+             ({FORMAT_VERSION} or 1, {}); start over with --restart",
             path.display(),
             protocol::PROTOCOL_VERSION
         );

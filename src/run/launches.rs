@@ -152,7 +152,7 @@ pub fn begin(ctx: &RunContext, mode: Mode) -> anyhow::Result<u64> {
         binary: binary_checksum(),
         host: Host::this(),
         seed: ctx.config.run.seed,
-        config: format!("{:016x}", ckpt::checksum(&config)),
+        config: format!("{:016x}", ckpt::fingerprint(&config)),
         earlier_launches_unrecorded: launch == 0 && resumed_from.is_some(),
         resumed_from,
     };
@@ -300,7 +300,7 @@ fn cpu_model(cpuinfo: &str) -> Option<String> {
 fn binary_checksum() -> String {
     std::env::current_exe().and_then(std::fs::read).map_or_else(
         |_| "unknown".to_owned(),
-        |bytes| format!("{:016x}", ckpt::checksum(&bytes)),
+        |bytes| format!("{:016x}", ckpt::fingerprint(&bytes)),
     )
 }
 

@@ -36,8 +36,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::proc::evaluator::EvalSchedule;
 
-/// Version of the serial checkpoint format; a checkpoint of another version is refused.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of the serial checkpoint format; a checkpoint of another version is refused, but
+/// for format 1 (the same files, checksummed with [`ckpt::fingerprint`]; see
+/// [`ckpt::Checksum`]).
+pub const FORMAT_VERSION: u32 = 2;
 /// Folder of the serial checkpoints inside a run's `checkpoints/`.
 pub const SUBDIR: &str = "serial";
 /// Checkpoints kept (older ones are removed after a new one is written).
@@ -375,9 +377,9 @@ pub fn read_latest(dir: &Path, config: &protocol::Config) -> anyhow::Result<Opti
         return Ok(None);
     };
     let manifest: Manifest = ckpt::read_manifest(&path, MANIFEST)?;
-    check_compatible(&manifest, config, &path)?;
+    let sum = check_compatible(&manifest, config, &path)?;
     let manifest_path = path.join(MANIFEST);
-    let mut blobs = ckpt::read_checked(&path, &manifest.files, &manifest_path)?;
+    let mut blobs = ckpt::read_checked(&path, &manifest.files, &manifest_path, sum)?;
     let mut take = |name: &str| {
         blobs
             .remove(name)
@@ -415,19 +417,22 @@ pub fn read_latest(dir: &Path, config: &protocol::Config) -> anyhow::Result<Opti
     }))
 }
 
+/// `manifest` against this run's versions and config; the checksum its format lists files
+/// with.
 fn check_compatible(
     manifest: &Manifest,
     config: &protocol::Config,
     path: &Path,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<ckpt::Checksum> {
     let versions = (manifest.format_version, manifest.protocol_version);
-    if versions != (FORMAT_VERSION, PROTOCOL_VERSION) {
+    let sum = ckpt::Checksum::of_format(manifest.format_version, FORMAT_VERSION);
+    let (Some(sum), PROTOCOL_VERSION) = (sum, manifest.protocol_version) else {
         bail!(
             "serial checkpoint {} has format/protocol version {versions:?}, this build needs \
-             ({FORMAT_VERSION}, {PROTOCOL_VERSION}); start over with --restart",
+             ({FORMAT_VERSION} or 1, {PROTOCOL_VERSION}); start over with --restart",
             path.display()
         );
-    }
+    };
     let ours = (
         config.run.n_actors as u32,
         config.run.seed,
@@ -450,7 +455,7 @@ fn check_compatible(
             config.eval.interval_episodes
         );
     }
-    Ok(())
+    Ok(sum)
 }
 
 #[cfg(test)]

@@ -44,7 +44,7 @@ use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
 use ckpt::{array, meta, parse as parse_safetensors, serialize, TmpFolder};
-pub use ckpt::{checksum, FileEntry, FileError};
+pub use ckpt::{checksum, Checksum, FileEntry, FileError};
 
 use super::{IngestStats, Learner, PublishState};
 use crate::adam::{Adam, AdamState};
@@ -59,8 +59,9 @@ use crate::si::losses::SiLossStats;
 use crate::si::{SiBuffer, SiBufferParts, SiStats};
 use nets::TaskDims;
 
-/// Version of the checkpoint format; a checkpoint of another version is refused.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of the checkpoint format; a checkpoint of another version is refused, but for
+/// format 1 (the same files, checksummed with [`ckpt::fingerprint`]; see [`ckpt::Checksum`]).
+pub const FORMAT_VERSION: u32 = 2;
 /// Name of the manifest inside a checkpoint folder.
 pub const MANIFEST: &str = "manifest.json";
 /// Checkpoints kept in `checkpoints/` (older ones are removed after a new one is written).
@@ -130,7 +131,7 @@ pub struct Checkpoint {
 }
 
 /// Fingerprint of the config sections that shape the learner's state — `env`, `hierarchy`,
-/// `learner`, `replay`, `encoder` — as [`checksum`] of their JSON. Other sections (run
+/// `learner`, `replay`, `encoder` — as [`ckpt::fingerprint`] of their JSON. Other sections (run
 /// length, seeds, exploration, graph, evaluation, transport) may change on resume.
 pub fn config_fingerprint(config: &Config) -> String {
     let sections = serde_json::json!({
@@ -140,7 +141,10 @@ pub fn config_fingerprint(config: &Config) -> String {
         "replay": config.replay,
         "encoder": config.encoder,
     });
-    format!("{:016x}", checksum(sections.to_string().as_bytes()))
+    format!(
+        "{:016x}",
+        ckpt::fingerprint(sections.to_string().as_bytes())
+    )
 }
 
 /// The newest complete checkpoint in `dir` (a run's `checkpoints/`), if any; `None` when the
@@ -288,8 +292,8 @@ impl Learner {
         // the seed only initialises weights and generators, which are all restored.
         let mut learner = Learner::with_episode_length(config, dims, 1, 0)?;
         let manifest: Manifest = ckpt::read_manifest(path, MANIFEST)?;
-        check_compatible(&learner, config, &manifest, &path.join(MANIFEST))?;
-        let blobs = ckpt::read_checked(path, &manifest.files, &path.join(MANIFEST))?;
+        let sum = check_compatible(&learner, config, &manifest, &path.join(MANIFEST))?;
+        let blobs = ckpt::read_checked(path, &manifest.files, &path.join(MANIFEST), sum)?;
         for part in PARTS {
             let file = path.join(part.file);
             let bytes = blobs
@@ -321,23 +325,24 @@ impl Learner {
     }
 }
 
-/// Versions, layout and config of `manifest` against this learner's.
+/// Versions, layout and config of `manifest` against this learner's; the checksum its format
+/// lists files with.
 fn check_compatible(
     learner: &Learner,
     config: &Config,
     manifest: &Manifest,
     path: &Path,
-) -> Result<(), CheckpointError> {
+) -> Result<Checksum, CheckpointError> {
     let differ = |what: &str, expected: String, found: String| {
         Err(ckpt::incompatible(path, what, expected, found).into())
     };
-    if manifest.format_version != FORMAT_VERSION {
+    let Some(sum) = Checksum::of_format(manifest.format_version, FORMAT_VERSION) else {
         return differ(
             "format version",
-            FORMAT_VERSION.to_string(),
+            format!("{FORMAT_VERSION} (or 1)"),
             manifest.format_version.to_string(),
         );
-    }
+    };
     if manifest.protocol_version != PROTOCOL_VERSION {
         return differ(
             "protocol version",
@@ -361,7 +366,7 @@ fn check_compatible(
             manifest.config_fingerprint.clone(),
         );
     }
-    Ok(())
+    Ok(sum)
 }
 
 /// Safetensors bytes of named f32 arrays `(name, shape, data)` with string metadata.
