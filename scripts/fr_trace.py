@@ -78,7 +78,7 @@ def walks(path):
 
 SEGMENT = re.compile(
     r"FR decision episode=(\d+) t=(\d+) xy=Some\(\[([-\d.e]+), ([-\d.e]+)\]\) "
-    r"phi=\[([-\d.e]+), ([-\d.e]+)\] choice=(\w+)(?: \{ k: \d+, index: Some\((\d+)\) \})?"
+    r"phi=\[([-\d.e]+), ([-\d.e]+)\] choice=(\w+)(?: \{ k: \d+, index: Some\((\d+)\)(?:, cut: \w+)? \})?"
     r".*?subgoal=\[([-\d.e]+), ([-\d.e]+)\]"
 )
 ASSIGNED = re.compile(r"FR episode assigned .*?frontier=\[([-\d.e]+), ([-\d.e]+)\]")

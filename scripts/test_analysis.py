@@ -44,8 +44,10 @@ def decision(episode, t, xy, phi, choice, subgoal, switch="None"):
     )
 
 
-def waypoint(k, index):
-    return f"Waypoint {{ k: {k}, index: Some({index}) }}"
+def waypoint(k, index, cut=None):
+    """The choice as the actor logs it; builds since `asi.fr_waypoint_straightness` add `cut`."""
+    tail = "" if cut is None else f", cut: {cut}"
+    return f"Waypoint {{ k: {k}, index: Some({index}){tail} }}"
 
 
 class TraceSegments(unittest.TestCase):
@@ -53,7 +55,7 @@ class TraceSegments(unittest.TestCase):
         lines = [
             # Episode 1: φ (0, 0) -> (3, 4) -> (6, 8), waypoints at route indices 4 then 5.
             decision(1, 0, (0.0, 0.0), (0.0, 0.0), waypoint(4, 4), (6.0, 8.0)),
-            decision(1, 20, (0.3, 0.4), (3.0, 4.0), waypoint(4, 5), (8.0, 8.0)),
+            decision(1, 20, (0.3, 0.4), (3.0, 4.0), waypoint(4, 5, cut="false"), (8.0, 8.0)),
             # A count-mode decision after the switch: starts no navigation segment.
             decision(1, 40, (0.6, 0.8), (6.0, 8.0), "Count { fallback: false }", (1.0, 1.0), "Some(Stuck)"),
             decision(1, 60, (0.6, 0.8), (6.0, 8.0), "Count { fallback: false }", (1.0, 1.0)),

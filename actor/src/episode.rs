@@ -391,7 +391,10 @@ impl Episode {
         rollout.decisions.n_decisions += 1;
         let stats = &mut rollout.frontier_stats;
         match decided.choice {
-            FrChoice::Waypoint { .. } => stats.n_waypoint_decisions += 1,
+            FrChoice::Waypoint { cut, .. } => {
+                stats.n_waypoint_decisions += 1;
+                stats.n_waypoints_cut += u64::from(cut);
+            }
             FrChoice::Count { fallback } => {
                 stats.n_count_decisions += 1;
                 stats.n_count_fallbacks += u64::from(fallback);

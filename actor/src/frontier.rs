@@ -15,7 +15,9 @@
 //!      use the normal HESS/policy sources (digest §7 item 1);
 //!   2. navigation: the route point nearest to ag (Eq. 9, Euclidean, first on ties), then the
 //!      point k further (k uniform in `asi.fr_k_range`, inclusive), clamped to the last node;
-//!      an empty route gives g_F itself ([`waypoint`]). The low level acts deterministically
+//!      an empty route gives g_F itself ([`waypoint`]). With `asi.fr_waypoint_straightness`
+//!      r > 0, an experiment, the waypoint is cut back to where the route folds
+//!      ([`straight_waypoint_index`]). The low level acts deterministically
 //!      (with `asi.fr_noise_free_low = false`, an experiment, it keeps its noise);
 //!   3. count mode: `asi.count_mode_candidates` points uniform in the ±abs_range box around ag,
 //!      the least visited by the graph's n(v) (Eq. 10) chosen by the oracle; with no answer the
@@ -45,6 +47,8 @@ use crate::oracle::GraphOracle;
 pub struct FrontierParams {
     /// Inclusive range of the waypoint offset k (`asi.fr_k_range`; route nodes).
     pub k_range: [u32; 2],
+    /// Cut the waypoint where the route folds (`asi.fr_waypoint_straightness`; 0: never).
+    pub straightness: f32,
     /// Count mode within this φ-distance of g_F (`asi.frontier_epsilon`, ε).
     pub epsilon: f32,
     /// Stuck when φ(s_t) is closer than this to both previous FR decision points
@@ -75,6 +79,7 @@ impl FrontierParams {
         }
         Ok(Some(Self {
             k_range: asi.fr_k_range,
+            straightness: asi.fr_waypoint_straightness as f32,
             epsilon: asi.frontier_epsilon as f32,
             stuck_threshold: asi.stuck_threshold as f32,
             n_candidates: asi.count_mode_candidates,
@@ -97,6 +102,9 @@ pub struct FrontierStats {
     pub n_goals_forced: u64,
     /// FR decisions that took a route waypoint.
     pub n_waypoint_decisions: u64,
+    /// Of those, the waypoints cut back where the route folds (`asi.fr_waypoint_straightness`).
+    #[serde(default)]
+    pub n_waypoints_cut: u64,
     /// FR decisions in count mode.
     pub n_count_decisions: u64,
     /// Count-mode decisions whose least-visited query got no answer (the first candidate was
@@ -214,6 +222,34 @@ pub fn waypoint_index(route: &[LatentPoint], at: &[f32], k: u32) -> Option<usize
     Some(nearest.saturating_add(k as usize).min(route.len() - 1))
 }
 
+/// Index of the waypoint with the fold cut: [`waypoint_index`], cut back to the furthest
+/// point `j` up to which every route point `i` (nearest < i ≤ j) is at least `straightness`
+/// times as far from the nearest point in a straight line as along the route; `j` is at least
+/// one past the nearest (a single hop is straight). Returns the index and whether it was cut;
+/// `straightness` 0 never cuts. `None` for an empty route.
+pub fn straight_waypoint_index(
+    route: &[LatentPoint],
+    at: &[f32],
+    k: u32,
+    straightness: f32,
+) -> Option<(usize, bool)> {
+    let nearest = nearest_route_index(route, at)?;
+    let end = nearest.saturating_add(k as usize).min(route.len() - 1);
+    if straightness <= 0.0 {
+        return Some((end, false));
+    }
+    let origin = &route[nearest];
+    let mut along = 0.0f32;
+    for i in nearest + 1..=end {
+        along += squared_distance(&route[i], &route[i - 1]).sqrt();
+        let straight = squared_distance(&route[i], origin).sqrt();
+        if i > nearest + 1 && straight < straightness * along {
+            return Some((i - 1, true));
+        }
+    }
+    Some((end, false))
+}
+
 /// The waypoint ([`waypoint_index`]); the frontier itself when the route is empty.
 pub fn waypoint(route: &[LatentPoint], frontier: LatentPoint, at: &[f32], k: u32) -> LatentPoint {
     waypoint_index(route, at, k).map_or(frontier, |index| route[index])
@@ -245,12 +281,14 @@ pub enum Switch {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum FrChoice {
     /// A route waypoint: route index `index`, `k` past the nearest point (`index` is `None`
-    /// when the route was empty and g_F was taken).
+    /// when the route was empty and g_F was taken), or nearer when `cut` where the route folds.
     Waypoint {
         /// The drawn offset.
         k: u32,
         /// Route index taken.
         index: Option<usize>,
+        /// The index was cut back where the route folds ([`straight_waypoint_index`]).
+        cut: bool,
     },
     /// Count mode: the least-visited candidate; `fallback` when the oracle did not answer and
     /// the first candidate was taken.
@@ -394,10 +432,11 @@ impl FrontierEpisode {
             count_mode_subgoal(at, params, phi_version, rng, oracle)?
         } else {
             let k = rng.random_range(params.k_range[0]..=params.k_range[1]);
-            let index = waypoint_index(&self.route, &at, k);
+            let found = straight_waypoint_index(&self.route, &at, k, params.straightness);
+            let (index, cut) = (found.map(|(i, _)| i), found.is_some_and(|(_, cut)| cut));
             let subgoal = index.map_or(self.frontier, |i| self.route[i]);
             self.n_waypoints += 1;
-            (subgoal, FrChoice::Waypoint { k, index })
+            (subgoal, FrChoice::Waypoint { k, index, cut })
         };
         self.prev2 = self.prev;
         self.prev = Some(at);

@@ -3,8 +3,9 @@
 //! double for the graph-service; the actor's logic is the real one).
 
 use actor::frontier::{
-    assign, count_candidates, nearest_route_index, waypoint, Assignment, FrChoice, FrEnd,
-    FrOutcome, FrontierEpisode, FrontierParams, Switch,
+    assign, count_candidates, nearest_route_index, straight_waypoint_index, waypoint,
+    waypoint_index, Assignment, FrChoice, FrEnd, FrOutcome, FrontierEpisode, FrontierParams,
+    Switch,
 };
 use actor::{
     Actor, ActorError, Chunk, ExploreAnswer, GraphOracle, GraphTransport, LeastVisitedAnswer,
@@ -127,6 +128,7 @@ fn no_route(_from: LatentPoint) -> Option<FrontierRoute> {
 fn params() -> FrontierParams {
     FrontierParams {
         k_range: [3, 6],
+        straightness: 0.0,
         epsilon: 8.0,
         stuck_threshold: 1.0,
         n_candidates: 100,
@@ -183,6 +185,144 @@ fn the_waypoint_is_k_nodes_past_the_nearest_and_clamped_to_the_last_node() {
     );
 }
 
+/// A route that runs along a corridor and turns back under it (a U-turn, as PointMaze-S's
+/// route at a fold): x = 0, 2, …, 12 at y = 0, down to (12, 2) and (12, 4), back along y = 4 to
+/// x = 0. Indices 0–6 on the first leg, 7–8 in the turn, 9–14 on the way back.
+fn u_route() -> Vec<LatentPoint> {
+    let out = (0..7).map(|i| [2.0 * i as f32, 0.0]);
+    let turn = [[12.0, 2.0], [12.0, 4.0]];
+    let back = (0..6).map(|i| [10.0 - 2.0 * i as f32, 4.0]);
+    out.chain(turn).chain(back).collect()
+}
+
+#[test]
+fn the_fold_cut_stops_the_waypoint_where_the_route_turns_back() {
+    let route = u_route();
+    let at = [2.2, -0.5]; // nearest: index 1, (2, 0)
+                          // Without the cut: k = 8 past index 1 is index 9, (10, 4), on the way back, 8 away from
+                          // (2, 0) in a straight line, through the wall between the legs.
+    assert_eq!(waypoint_index(&route, &at, 8), Some(9));
+    assert_eq!(
+        straight_waypoint_index(&route, &at, 8, 0.0),
+        Some((9, false))
+    );
+    // Straight distances from (2, 0) over route lengths: index 6 10/10, 7 √104/12 = 0.850,
+    // 8 √116/14 = 0.769, 9 √80/16 = 0.559.
+    assert_eq!(
+        straight_waypoint_index(&route, &at, 8, 0.9),
+        Some((6, true))
+    );
+    assert_eq!(
+        straight_waypoint_index(&route, &at, 8, 0.8),
+        Some((7, true))
+    );
+    assert_eq!(
+        straight_waypoint_index(&route, &at, 8, 0.7),
+        Some((8, true))
+    );
+    assert_eq!(
+        straight_waypoint_index(&route, &at, 8, 0.5),
+        Some((9, false))
+    );
+    // Before the turn nothing is cut; the cut never goes below one point past the nearest.
+    assert_eq!(
+        straight_waypoint_index(&route, &at, 4, 1.0),
+        Some((5, false))
+    );
+    assert_eq!(
+        straight_waypoint_index(&route, &[12.1, 2.0], 3, 1.0),
+        Some((8, true))
+    );
+    assert_eq!(
+        straight_waypoint_index(&route, &[12.0, 0.1], 3, 1.0),
+        Some((8, true))
+    );
+    assert_eq!(
+        straight_waypoint_index(&route, &[8.0, 4.1], 5, 1.0),
+        Some((14, false))
+    );
+    assert_eq!(
+        straight_waypoint_index(&route, &[0.0, 4.0], 3, 1.0),
+        Some((14, false))
+    );
+    assert_eq!(straight_waypoint_index(&[], &at, 3, 0.9), None);
+}
+
+/// The fold cut by its definition, in f64: the largest j in (nearest, nearest + k] (clamped)
+/// such that every i in (nearest, j] has straight ≥ r · along, at least nearest + 1.
+fn straight_waypoint_brute(route: &[LatentPoint], at: &[f32], k: u32, r: f64) -> (usize, bool) {
+    let n = nearest_route_index(route, at).unwrap();
+    let end = (n + k as usize).min(route.len() - 1);
+    let dist = |a: &LatentPoint, b: &LatentPoint| {
+        (f64::from(a[0]) - f64::from(b[0])).hypot(f64::from(a[1]) - f64::from(b[1]))
+    };
+    let straight_to = |j: usize| {
+        (n + 1..=j).all(|i| {
+            let along: f64 = (n + 1..=i).map(|m| dist(&route[m], &route[m - 1])).sum();
+            i == n + 1 || dist(&route[i], &route[n]) >= r * along
+        })
+    };
+    let j = (n + 1..=end).rev().find(|&j| straight_to(j)).unwrap_or(end);
+    (j, j < end)
+}
+
+#[test]
+fn the_fold_cut_agrees_with_its_definition_on_random_routes() {
+    use rand::Rng;
+    let mut rng = Pcg64Mcg::seed_from_u64(11);
+    let mut cuts = 0;
+    for _ in 0..2_000 {
+        let len = rng.random_range(1..12);
+        // A random walk of unit-ish steps that often turns.
+        let mut p = [0.0f32, 0.0];
+        let route: Vec<LatentPoint> = (0..len)
+            .map(|_| {
+                let angle: f32 = rng.random_range(0.0..std::f32::consts::TAU);
+                let step: f32 = rng.random_range(0.5..2.0);
+                p = [p[0] + step * angle.cos(), p[1] + step * angle.sin()];
+                p
+            })
+            .collect();
+        let at = [rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0)];
+        let k = rng.random_range(1..8);
+        let r: f32 = rng.random_range(0.1..1.0);
+        let got = straight_waypoint_index(&route, &at, k, r).unwrap();
+        assert_eq!(
+            got,
+            straight_waypoint_brute(&route, &at, k, f64::from(r)),
+            "{route:?} at {at:?}, k {k}, r {r}"
+        );
+        cuts += usize::from(got.1);
+    }
+    assert!(cuts > 200, "the random routes exercise the cut: {cuts}");
+}
+
+#[test]
+fn navigation_with_the_fold_cut_takes_the_turn_and_says_so() {
+    let mut fr = FrontierEpisode::new(found(u_route(), [0.0, 4.0]));
+    let mut rng = Pcg64Mcg::seed_from_u64(5);
+    let mut oracle = ScriptedOracle::new(no_route);
+    let p = FrontierParams {
+        k_range: [6, 6],
+        straightness: 0.9,
+        ..params()
+    };
+    // Nearest index 1: k = 6 would take index 7 in the turn; cut back to index 6, the corner.
+    let decided = fr
+        .decide([2.2, -20.0], &p, PhiVersion(0), &mut rng, &mut oracle)
+        .unwrap();
+    assert_eq!(
+        decided.choice,
+        FrChoice::Waypoint {
+            k: 6,
+            index: Some(6),
+            cut: true
+        }
+    );
+    assert_eq!(decided.subgoal, [12.0, 0.0]);
+    assert_eq!(decided.decision_kind(), DecisionKind::FrontierRoute);
+}
+
 #[test]
 fn navigation_draws_k_in_the_inclusive_range_and_takes_that_node() {
     let mut fr = FrontierEpisode::new(found(
@@ -198,11 +338,12 @@ fn navigation_draws_k_in_the_inclusive_range_and_takes_that_node() {
         let decided = fr
             .decide(at, &params(), PhiVersion(0), &mut rng, &mut oracle)
             .unwrap();
-        let FrChoice::Waypoint { k, index } = decided.choice else {
+        let FrChoice::Waypoint { k, index, cut } = decided.choice else {
             panic!("navigation expected, got {decided:?}");
         };
         assert!((3..=6).contains(&k), "k = {k}");
         assert_eq!(index, Some(k as usize));
+        assert!(!cut, "a straight route is never cut");
         assert_eq!(decided.subgoal, [k as f32, 0.0]);
         assert_eq!(decided.decision_kind(), DecisionKind::FrontierRoute);
         assert!(decided.deterministic_low());

@@ -103,6 +103,7 @@ fn validate_lists_every_problem_with_its_value() {
     config.learner.high.gamma = 1.5;
     config.learner.low.tau = 0.0;
     config.asi.fr_k_range = [5, 3];
+    config.asi.fr_waypoint_straightness = 1.2;
     config.asi.fr_prob_schedule = vec![FrProbStep {
         from_episode: 10,
         p: 1.5,
@@ -113,6 +114,7 @@ fn validate_lists_every_problem_with_its_value() {
         "learner.high.gamma",
         "learner.low.tau",
         "asi.fr_k_range",
+        "asi.fr_waypoint_straightness",
         "asi.fr_prob_schedule",
         "asi.fr_prob_schedule[0].p",
         "transport.max_actors",

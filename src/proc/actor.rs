@@ -232,6 +232,7 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
         ("actor/fr/stuck_switches", fr.n_stuck_switches),
         ("actor/fr/ended_by_new_phi", fr.n_ended_by_new_phi),
         ("actor/fr/navigating_at_end", fr.n_navigating_at_end),
+        ("actor/fr/waypoints_cut", fr.n_waypoints_cut),
     ];
     values.extend(
         frontier

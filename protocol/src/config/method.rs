@@ -347,6 +347,15 @@ pub struct AsiConfig {
     /// Inclusive range of the FR waypoint offset k along the route. Default [3, 6] (U);
     /// [2, 5] for the other tasks. Unit: route nodes. Source: supplement Table 2.
     pub fr_k_range: [u32; 2],
+    /// Cut the FR waypoint where the route folds. 0 (default; paper and code): the waypoint
+    /// is k route points past the nearest. r in (0, 1]: the furthest of those k points up to
+    /// which every route point lies at least r times as far from the nearest route point in a
+    /// straight line as along the route; a U-turn or corner of the route in φ brings the
+    /// straight distance down, so the walk heads for the turn instead of a point across the
+    /// wall beyond it (docs/RESULTS.md, "FR with the frontier just past a fold"). The
+    /// waypoint is always at least one point past the nearest. An experiment, not in the
+    /// paper. Unit: ratio.
+    pub fr_waypoint_straightness: f64,
     /// Switch to count mode within this φ-distance of the frontier (ε). Default 8.
     /// Unit: φ units. Source: code.
     pub frontier_epsilon: f64,
@@ -483,6 +492,7 @@ impl Default for AsiConfig {
             ],
             frontier_fraction: 0.9,
             fr_k_range: [3, 6],
+            fr_waypoint_straightness: 0.0,
             frontier_epsilon: 8.0,
             stuck_threshold: 1.0,
             count_mode_candidates: 100,
@@ -520,6 +530,12 @@ impl AsiConfig {
         self.check_schedule(c);
         c.open_interval("asi.frontier_fraction", self.frontier_fraction, 0.0, 1.0);
         c.int_range("asi.fr_k_range", self.fr_k_range);
+        c.closed_interval(
+            "asi.fr_waypoint_straightness",
+            self.fr_waypoint_straightness,
+            0.0,
+            1.0,
+        );
         c.positive("asi.frontier_epsilon", self.frontier_epsilon);
         c.non_negative("asi.stuck_threshold", self.stuck_threshold);
         c.at_least_one(
