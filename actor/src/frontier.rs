@@ -218,8 +218,7 @@ pub fn nearest_route_index(route: &[LatentPoint], at: &[f32]) -> Option<usize> {
 /// Index of the waypoint: k route points past the point nearest to `at`, clamped to the last
 /// node; `None` for an empty route.
 pub fn waypoint_index(route: &[LatentPoint], at: &[f32], k: u32) -> Option<usize> {
-    let nearest = nearest_route_index(route, at)?;
-    Some(nearest.saturating_add(k as usize).min(route.len() - 1))
+    straight_waypoint_index(route, at, k, 0.0).map(|(index, _)| index)
 }
 
 /// Index of the waypoint with the fold cut: [`waypoint_index`], cut back to the furthest

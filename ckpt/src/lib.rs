@@ -197,12 +197,11 @@ const fn crc64_tables() -> [[u64; 256]; 16] {
 pub fn checksum(bytes: &[u8]) -> u64 {
     let t = &CRC64_TABLES;
     let mut crc = !0u64;
-    let blocks = bytes.chunks_exact(16);
-    let tail = blocks.remainder();
+    let (blocks, tail) = bytes.as_chunks::<16>();
     for block in blocks {
-        let (lo, hi) = block.split_at(8);
-        let lo = crc ^ u64::from_le_bytes(lo.try_into().expect("8 bytes"));
-        let hi = u64::from_le_bytes(hi.try_into().expect("8 bytes"));
+        let both = u128::from_le_bytes(*block);
+        let lo = crc ^ both as u64;
+        let hi = (both >> 64) as u64;
         let byte = |v: u64, k: u32| ((v >> (8 * k)) & 0xff) as usize;
         crc = t[15][byte(lo, 0)]
             ^ t[14][byte(lo, 1)]
