@@ -24,7 +24,9 @@
 # asi.fr_start_episode / asi.si_start_episode, 200 and 300 where it sets none; set by hand
 # they must equal them, or the script stops before running anything), JOBS (2)
 # arms run at once, NICE (19) their priority, CKPT_MINS (10) minutes between checkpoints
-# (run.checkpoint_interval_mins; they do not change the results). Re-running resumes every
+# (run.checkpoint_interval_mins; they do not change the results). A stage stopped short of its
+# episode count (a signal: asi writes a checkpoint and exits) stops the script with a message,
+# after the stages running beside it end. Re-running resumes every
 # unfinished stage; a stage killed before its first checkpoint starts over (`--restart`: its
 # folder is moved aside to <dir>.old-<secs>, nothing is deleted). The asi and asi-no-fr arms
 # go on in their branch's folder, so an arm forked from a branch (asi-no-si from asi, hess from
@@ -130,7 +132,25 @@ run() {
     nice -n "$nice_level" "$bin" train --serial --config "$config" --seed "$seed" \
         --run-dir "$dir" $restart ${flags[$arm]} --set run.max_episodes="$until" \
         --set run.checkpoint_interval_mins="$ckpt_mins" >>"$dir.log" 2>&1
+    # A run stopped by a signal writes its checkpoint and exits 0 short of UNTIL: the stages
+    # after it must not start (a fork would copy the wrong episode).
+    local reached
+    reached=$(done_episodes "$dir")
+    if (( reached < until )); then
+        echo "$(date -u +%T) $(basename "$dir"): stopped at episode $reached of $until" \
+            "(see $dir.log); run the same command again to resume it" >&2
+        return 1
+    fi
     echo "$(date -u +%T) $(basename "$dir"): done"
+}
+
+# wait_all PID...: waits for every job and fails when any of them failed.
+wait_all() {
+    local failed=0 pid
+    for pid in "$@"; do
+        wait "$pid" || failed=1
+    done
+    return "$failed"
 }
 
 # fork FROM TO AT: copies the prefix in FROM, which must be at episode AT, unless TO exists
@@ -159,15 +179,18 @@ fork "$trunk" "$fr_on" "$fr_start"
 fork "$trunk" "$fr_off" "$fr_start"
 # Both branches to SI_START.
 run "$fr_on" asi "$si_start" &
+on=$!
 run "$fr_off" asi-no-fr "$si_start" &
-wait
+wait_all "$on" $!
 
 if [[ " ${arms[*]} " == *" asi-no-si "* ]]; then fork "$fr_on" "$out/asi-no-si_s$seed" "$si_start"; fi
 if [[ " ${arms[*]} " == *" hess "* ]]; then fork "$fr_off" "$out/hess_s$seed" "$si_start"; fi
 # The arms to EPISODES, JOBS at a time.
+pids=()
 for arm in "${arms[@]}"; do
-    while (( $(jobs -rp | wc -l) >= jobs )); do wait -n; done
+    while (( $(jobs -rp | wc -l) >= jobs )); do wait -n || true; done
     run "$out/${arm}_s$seed" "$arm" "$episodes" &
+    pids+=($!)
 done
-wait
+wait_all "${pids[@]}"
 echo "$(date -u +%T) seed $seed: ${arms[*]} at $episodes episodes in $out"

@@ -508,8 +508,11 @@ done = 0
 if os.path.exists(path):
     for line in open(path):
         done = json.loads(line)["learner/schedule/train_episodes"]
+# FAKE_STOP_AT plays a signal: the run stops there, short of run.max_episodes, and exits 0.
+until = int(sets["run.max_episodes"])
+until = min(until, int(os.environ.get("FAKE_STOP_AT", until)))
 with open(path, "a") as out:
-    for episode in range(done + 1, int(sets["run.max_episodes"]) + 1):
+    for episode in range(done + 1, until + 1):
         out.write(json.dumps({"learner/schedule/train_episodes": episode, "fr": fr, "si": si}) + "\n")
 """
 
@@ -533,10 +536,10 @@ class PaperArms(unittest.TestCase):
     def tearDown(self):
         self.dir.cleanup()
 
-    def arms(self, arms, **fork_points):
+    def arms(self, arms, **extra_env):
         script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_arms.sh")
-        env = {k: v for k, v in os.environ.items() if k not in ("FR_START", "SI_START")}
-        env.update(ARMS=arms, ASI_BIN=self.bin, NICE="0", **fork_points)
+        env = {k: v for k, v in os.environ.items() if k not in ("FR_START", "SI_START", "FAKE_STOP_AT")}
+        env.update(ARMS=arms, ASI_BIN=self.bin, NICE="0", **extra_env)
         return subprocess.run(["bash", script, self.config, "0", "40", self.out], env=env,
                               capture_output=True, text=True, timeout=120)
 
@@ -575,6 +578,28 @@ class PaperArms(unittest.TestCase):
         self.assertFalse(os.path.exists(os.path.join(self.out, "asi-no-si_s0")))
         # hess from the FR-off branch, still at 30, is fine.
         self.assertEqual(self.arms("hess").returncode, 0)
+        self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
+
+    def test_a_stage_stopped_short_stops_the_script_and_resumes_on_a_rerun(self):
+        # The trunk stops at 12 of 20: nothing is forked from it.
+        stopped = self.arms("asi hess", FAKE_STOP_AT="12")
+        self.assertEqual(stopped.returncode, 1)
+        self.assertIn("trunk_s0: stopped at episode 12 of 20", stopped.stderr)
+        self.assertFalse(os.path.exists(os.path.join(self.out, "asi_s0")))
+        # The branches stop at 25 of 30 (both run, beside each other): no arm is forked.
+        stopped = self.arms("asi hess", FAKE_STOP_AT="25")
+        self.assertEqual(stopped.returncode, 1)
+        self.assertIn("asi_s0: stopped at episode 25 of 30", stopped.stderr)
+        self.assertIn("asi-no-fr_s0: stopped at episode 25 of 30", stopped.stderr)
+        self.assertFalse(os.path.exists(os.path.join(self.out, "hess_s0")))
+        # An arm stopping at 35 of 40 fails the script too, after the others end.
+        stopped = self.arms("asi hess", FAKE_STOP_AT="35")
+        self.assertEqual(stopped.returncode, 1)
+        self.assertIn("hess_s0: stopped at episode 35 of 40", stopped.stderr)
+        # The same command resumes every stage where it stopped.
+        done = self.arms("asi hess")
+        self.assertEqual(done.returncode, 0, done.stderr)
+        self.assertEqual(self.switches("asi"), [(1, 20, False, True), (21, 40, True, True)])
         self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
 
     def test_fork_points_other_than_the_configs_are_refused(self):
