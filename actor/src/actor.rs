@@ -532,8 +532,14 @@ impl Actor {
             if let Some(end) = episode.frontier_end() {
                 stats.last_fr_end = Some(end);
                 stats.last_fr_episode = stats.episodes;
-                if end.outcome == FrOutcome::Navigating {
-                    self.rollout.frontier_stats.n_navigating_at_end += 1;
+                // One outcome per finished FR episode (near-frontier switches count at the
+                // switch: only navigation can end in one).
+                let fr = &mut self.rollout.frontier_stats;
+                match end.outcome {
+                    FrOutcome::NearFrontier => {}
+                    FrOutcome::Stuck => fr.n_stuck_while_navigating += 1,
+                    FrOutcome::NewPhi => fr.n_new_phi_while_navigating += 1,
+                    FrOutcome::Navigating => fr.n_navigating_at_end += 1,
                 }
             }
             tracing::debug!(

@@ -112,10 +112,19 @@ pub struct FrontierStats {
     pub n_count_fallbacks: u64,
     /// Switches to count mode because φ(s_t) came within ε of the frontier.
     pub n_near_frontier_switches: u64,
-    /// Switches to count mode because the agent was stuck (FR mode ended).
+    /// Switches to count mode because the agent was stuck (FR mode ended). The test also runs
+    /// in the count mode after a near-frontier switch, so this counts those too.
     pub n_stuck_switches: u64,
-    /// FR episodes whose FR mode ended because a new φ arrived mid-episode.
+    /// Finished FR episodes whose navigation ended stuck, before the frontier
+    /// ([`FrOutcome::Stuck`]; the stuck switches that ended navigation).
+    #[serde(default)]
+    pub n_stuck_while_navigating: u64,
+    /// FR episodes whose FR mode ended because a new φ arrived mid-episode (also after a
+    /// near-frontier switch, in count mode).
     pub n_ended_by_new_phi: u64,
+    /// Finished FR episodes whose navigation a new φ ended ([`FrOutcome::NewPhi`]).
+    #[serde(default)]
+    pub n_new_phi_while_navigating: u64,
     /// FR episodes that ended still navigating: neither near the frontier nor stuck nor
     /// ended by a new φ before the env ended the episode ([`FrOutcome::Navigating`]).
     #[serde(default)]

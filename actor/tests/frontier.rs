@@ -713,7 +713,7 @@ fn an_fr_episode_follows_the_route_with_waypoints_k_nodes_ahead_and_a_far_goal()
     );
     assert_eq!(actor.stats().n_decisions, 10);
     // Never stuck, never near the frontier: the episode ends navigating, at its last state.
-    assert_eq!(stats.n_navigating_at_end, 1);
+    assert_eq!(outcomes(&stats), (0, 0, 0, 1));
     let last = records.last().unwrap();
     let end = actor.stats().last_fr_end.expect("an FR episode finished");
     assert_eq!(end.outcome, FrOutcome::Navigating);
@@ -750,6 +750,17 @@ fn dist(a: &[f32], b: &[f32]) -> f32 {
         .sqrt()
 }
 
+/// The finished FR episodes by how their navigation ended: near the frontier, stuck, new φ,
+/// still navigating (the four counters add up to the finished FR episodes).
+fn outcomes(stats: &actor::FrontierStats) -> (u64, u64, u64, u64) {
+    (
+        stats.n_near_frontier_switches,
+        stats.n_stuck_while_navigating,
+        stats.n_new_phi_while_navigating,
+        stats.n_navigating_at_end,
+    )
+}
+
 #[test]
 fn a_stuck_fr_episode_counts_once_then_decides_with_its_normal_source() {
     let mut config = config();
@@ -774,7 +785,7 @@ fn a_stuck_fr_episode_counts_once_then_decides_with_its_normal_source() {
         (2, 1)
     );
     // The navigation ended at the stuck decision, after two waypoints.
-    assert_eq!(stats.n_navigating_at_end, 0);
+    assert_eq!(outcomes(&stats), (0, 1, 0, 0));
     let end = actor.stats().last_fr_end.expect("an FR episode finished");
     assert_eq!((end.outcome, end.waypoint_decisions), (FrOutcome::Stuck, 2));
     assert_eq!(end.xy, [decided[2].obs[0], decided[2].obs[1]]);
@@ -808,7 +819,33 @@ fn near_the_frontier_every_decision_is_the_least_visited_candidate() {
         (FrOutcome::NearFrontier, 0, 1.0)
     );
     assert_eq!(end.xy, [decided[0].obs[0], decided[0].obs[1]]);
-    assert_eq!(stats.n_navigating_at_end, 0);
+    assert_eq!(outcomes(&stats), (1, 0, 0, 0));
+}
+
+#[test]
+fn a_stuck_switch_after_the_frontier_is_not_counted_as_stuck_while_navigating() {
+    let mut config = config();
+    config.asi.frontier_epsilon = 1.0e-4; // near the frontier only where the episode starts
+    config.asi.stuck_threshold = 1.0e6; // stuck once two decisions are behind
+    let mut actor = actor(&config, 9, 1.0);
+    let mut oracle = ScriptedOracle::new(frontier_here);
+    let decided = decisions(&episode(&mut actor, &mut oracle));
+    assert!(
+        dist(&decided[1].phi, &decided[0].phi) > 1.0e-4,
+        "the test needs φ to move off the frontier"
+    );
+    // Near the frontier at t = 0 (count mode), stuck at t = 20 (FR mode ends).
+    let mut expected = vec![DecisionKind::FrontierCount; 3];
+    expected.extend([DecisionKind::Random; 7]); // the actor's first episode is a random one
+    assert_eq!(kinds(&decided), expected);
+    let stats = actor.stats().frontier;
+    assert_eq!(
+        (stats.n_near_frontier_switches, stats.n_stuck_switches),
+        (1, 1)
+    );
+    assert_eq!(outcomes(&stats), (1, 0, 0, 0));
+    let end = actor.stats().last_fr_end.expect("an FR episode finished");
+    assert_eq!(end.outcome, FrOutcome::NearFrontier);
 }
 
 #[test]
@@ -885,11 +922,33 @@ fn a_new_phi_mid_episode_ends_fr_mode() {
     expected.extend([DecisionKind::Random; 4]);
     assert_eq!(kinds(&decided), expected);
     assert_eq!(actor.stats().frontier.n_ended_by_new_phi, 1);
-    assert_eq!(actor.stats().frontier.n_navigating_at_end, 0);
+    assert_eq!(outcomes(&actor.stats().frontier), (0, 0, 1, 0));
     let end = actor.stats().last_fr_end.expect("an FR episode finished");
     assert_eq!(
         (end.outcome, end.waypoint_decisions),
         (FrOutcome::NewPhi, 6)
+    );
+}
+
+#[test]
+fn a_new_phi_after_the_frontier_ends_fr_mode_but_not_navigation() {
+    let mut config = config();
+    config.asi.stuck_threshold = 0.0;
+    let mut actor = actor(&config, 12, 1.0);
+    let mut oracle = ScriptedOracle::new(frontier_here);
+    let first = actor.next_chunk(&mut oracle).unwrap();
+    reload(&mut actor, fr_schedule(1.0), 2);
+    let mut chunks = vec![first];
+    chunks.extend(episode(&mut actor, &mut oracle));
+    let mut expected = vec![DecisionKind::FrontierCount; 6];
+    expected.extend([DecisionKind::Random; 4]);
+    assert_eq!(kinds(&decisions(&chunks)), expected);
+    let stats = actor.stats().frontier;
+    assert_eq!(stats.n_ended_by_new_phi, 1, "FR mode (count mode) ended");
+    assert_eq!(
+        outcomes(&stats),
+        (1, 0, 0, 0),
+        "navigation ended at the frontier"
     );
 }
 

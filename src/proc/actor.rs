@@ -230,7 +230,15 @@ pub fn actor_metrics(s: &ActorStats, published_steps: u64) -> Vec<(String, f64)>
             fr.n_near_frontier_switches,
         ),
         ("actor/fr/stuck_switches", fr.n_stuck_switches),
+        (
+            "actor/fr/stuck_while_navigating",
+            fr.n_stuck_while_navigating,
+        ),
         ("actor/fr/ended_by_new_phi", fr.n_ended_by_new_phi),
+        (
+            "actor/fr/new_phi_while_navigating",
+            fr.n_new_phi_while_navigating,
+        ),
         ("actor/fr/navigating_at_end", fr.n_navigating_at_end),
         ("actor/fr/waypoints_cut", fr.n_waypoints_cut),
     ];
