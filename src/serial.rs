@@ -20,21 +20,22 @@
 //! and the checkpoint, exit 0). Checkpoints only read state, so a run's metrics do not depend
 //! on when they fall.
 //!
-//! The graph-service's checkpoint does not save its graph: a restore rebuilds it from the whole
-//! store, while a running service keeps the graph of its last φ re-map until the next one. So
-//! serial mode writes the graph-service's checkpoint only where the two agree — at start and
-//! in every round whose broadcast re-mapped φ (its *base*) — and logs every chunk and request
-//! it gets after that ([`LoggedGraph`]); a resume restores the base the serial checkpoint
-//! names (kept when later bases rotate the graph-service's checkpoints, so a run killed after
-//! more re-maps still resumes exactly) and replays the log.
+//! The graph-service's checkpoint is written only at start and in every round whose broadcast
+//! re-mapped φ (its *base*), and serial mode logs every chunk and request the service gets
+//! after that ([`LoggedGraph`]); a resume restores the base the serial checkpoint names (kept
+//! when later bases rotate the graph-service's checkpoints, so a run killed after more re-maps
+//! still resumes exactly) and replays the log. (Graph-service checkpoints of builds before
+//! 2026-12-06 did not hold the graph, and a restore rebuilt it from the whole store, while a
+//! running service keeps the graph of its last φ re-map: the bases sit where the two agree,
+//! so those checkpoints resume exactly too.)
 //!
 //! A resumed serial run (same folder; `run.max_episodes` or `run.max_env_steps` may grow)
 //! continues bit-identically to an uninterrupted run with the same seed — same `metrics.jsonl`
 //! and `eval.jsonl` lines (`tests/serial_resume.rs`). Not exact, and logged as such: a
 //! checkpoint written with open episodes (a run ended by its env-step budget mid-episode: they
 //! are lost), or after a failed base write (until the next φ re-map). The graph-service's
-//! `graph/version` is one higher after a restore (its rebuild), so it is not in the serial
-//! metrics lines.
+//! `graph/version` is one higher after a restore of an older build's checkpoint (its
+//! rebuild), so it is not in the serial metrics lines.
 
 use std::io::{BufWriter, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -232,9 +233,10 @@ impl Serial {
         let published =
             broadcast_weights(&mut self.learner, &mut self.actors, &mut self.graph.service)?;
         self.eval.on_weights(&self.ctx, published)?;
-        // This graph-service (fresh, or restored, which rebuilds its graph) is what a restore
-        // of its checkpoint gives back: a base for the input log. After a replay that did not
-        // match, the graph is rebuilt first so that this holds again.
+        // This graph-service (fresh or restored) is what a restore of its checkpoint gives
+        // back: a base for the input log. After a replay that did not match, the graph is
+        // rebuilt first, so that a base holds the graph of every stored state as after a φ
+        // re-map (what an older build's restore of it would rebuild).
         if !self.graph.log.is_empty() {
             self.graph.service.rebuild();
         }
@@ -666,9 +668,9 @@ impl GraphTransport for InProcessGraph<'_> {
 /// Serial mode's graph-service with the log of its inputs (chunks and requests) since its
 /// *base*: the newest graph-service checkpoint, written whenever its graph holds every stored
 /// state (at start and after each φ re-map). Restoring the base and replaying the log gives
-/// back the service exactly, although the graph-service's checkpoint does not save its graph
-/// (a restore rebuilds it from the whole store, while a running service keeps the graph of its
-/// last re-map). Weights messages are not logged: between re-maps they change nothing.
+/// back the service exactly (also from bases of builds before 2026-12-06, whose checkpoints
+/// did not hold the graph: their restore rebuilds it from the whole store, which at a base is
+/// the same graph). Weights messages are not logged: between re-maps they change nothing.
 struct LoggedGraph {
     service: GraphService,
     /// `checkpoints/graph-service/`.
@@ -847,7 +849,8 @@ fn write_line(
             object.insert(format!("actor{i}/{name}"), serde_json::json!(value));
         }
     }
-    // Not `graph/version`: a restored graph-service counts its rebuild as one more version.
+    // Not `graph/version`: a graph-service restored from an older build's checkpoint counts
+    // its rebuild as one more version.
     // All are counts, exact in f64; serial lines have always written them as integers.
     for (name, value) in crate::proc::graph_service::graph_metrics(&graph.stats()) {
         if name != "graph/version" {

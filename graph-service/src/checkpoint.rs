@@ -1,6 +1,6 @@
 //! Graph-service checkpoints: everything a restarted [`GraphService`] needs to answer as the
-//! old one did — the trajectory store, HESS's maps, the graph's visit counts, the φ it holds
-//! and its generator — in `checkpoints/graph-service/ckpt-NNNNNN/` under the run folder
+//! old one did — the trajectory store, HESS's maps, the graph and its visit counts, the φ it
+//! holds and its generator — in `checkpoints/graph-service/ckpt-NNNNNN/` under the run folder
 //! ([`SUBDIR`]; the learner's checkpoints sit beside it in `checkpoints/`).
 //!
 //! Layout of one checkpoint folder:
@@ -10,6 +10,7 @@
 //! | `store.safetensors` | states (`obs`), their latent points as stored (`latents`), per trajectory actor, episode, first env step, length, next chunk index, closed flag; open trajectories; eviction and gap counters in metadata |
 //! | `maps.safetensors` | graph visit counts n(v); HESS visits, future counts and potential per cell (keys as `i32` pairs); HESS counters in metadata |
 //! | `phi.safetensors` | the encoder tensors of the φ held (only once weights have arrived) |
+//! | `graph.safetensors` | the current graph (only once one is built): node cell keys `[n, 2]` (i32) in node order, edges `[m, 3]` (u32: a, b, weight; a < b, sorted); dropped-cell and unmapped-state counts in metadata |
 //! | `state.json` | φ version, graph version, generator state, request and chunk counters |
 //! | `manifest.json` | format and protocol versions, the config values the state depends on, size and checksum of each file above |
 //!
@@ -19,9 +20,11 @@
 //!   versions, the state-shaping config values ([`Manifest::shape`]), then the size and
 //!   checksum of every file, then parses every file into a fresh service; any problem is an
 //!   error naming the file, and no service is returned.
-//! - The graph is derived data and is not saved: a restore rebuilds it from the restored store
-//!   (so it also holds states that arrived after the last rebuild before the save, as
-//!   [`GraphService::rebuild`] would), which counts as one more graph version.
+//! - The graph is saved as it is: a running service keeps the graph of its last φ re-map while
+//!   new states arrive, and a restore gives back that graph, with its version, not one rebuilt
+//!   from the whole store. Checkpoints written before the graph was saved (`state.json`
+//!   without `graph_saved`) restore as they did: the graph rebuilt from the restored store,
+//!   which counts as one more graph version.
 //! - Latent points are restored as they were stored (no re-map): the restored service answers
 //!   with the same points, counts and φ.
 //! - The visit counts are saved and checked against a recount of the restored store (a
@@ -38,7 +41,8 @@ use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
 use crate::error::GraphServiceError;
-use crate::grid::CellKey;
+use crate::graph::LatentGraph;
+use crate::grid::{CellKey, Grid};
 use crate::hess::{HessMaps, HessParts};
 use crate::service::GraphService;
 use crate::store::{StoreCounters, Trajectory, TrajectoryHead, TrajectoryStore};
@@ -59,6 +63,7 @@ const TMP_PREFIX: &str = ".tmp-ckpt-";
 const STORE_FILE: &str = "store.safetensors";
 const MAPS_FILE: &str = "maps.safetensors";
 const PHI_FILE: &str = "phi.safetensors";
+const GRAPH_FILE: &str = "graph.safetensors";
 const STATE_FILE: &str = "state.json";
 
 /// Why a graph-service checkpoint could not be written or restored.
@@ -168,6 +173,10 @@ impl GraphService {
             })?;
             folder.add(PHI_FILE, weights)?;
         }
+        if let Some(graph) = &self.graph {
+            let bytes = save_graph(graph).map_err(|p| corrupt(&folder.path_of(GRAPH_FILE), p))?;
+            folder.add(GRAPH_FILE, &bytes)?;
+        }
         let state = serde_json::to_vec_pretty(&SavedState::of(self))
             .map_err(|e| corrupt(&folder.path_of(STATE_FILE), e.to_string()))?;
         folder.add(STATE_FILE, &state)?;
@@ -187,7 +196,8 @@ impl GraphService {
     }
 
     /// A service restored from the checkpoint folder `path` (a `ckpt-N`) for `config` and the
-    /// task's `dims`, its graph rebuilt. Refused with a [`CheckpointError`] naming the file
+    /// task's `dims`, with the graph it had (rebuilt from the store for a checkpoint written
+    /// before graphs were saved). Refused with a [`CheckpointError`] naming the file
     /// when the checkpoint is incompatible, corrupt or truncated; nothing is returned
     /// half-loaded.
     pub fn restore(
@@ -225,8 +235,15 @@ impl GraphService {
                 .map_err(|e| corrupt(&path.join(PHI_FILE), e.to_string()))?;
             service.phi = Some(phi);
         }
+        let graph_saved = state.graph_saved;
         state.apply(&mut service);
-        service.rebuild();
+        if !graph_saved {
+            service.rebuild();
+        } else if manifest.files.iter().any(|f| f.name == GRAPH_FILE) {
+            let graph = restore_graph(service.grid, file(GRAPH_FILE)?)
+                .map_err(|p| corrupt(&path.join(GRAPH_FILE), p))?;
+            service.set_graph(graph);
+        }
         Ok((
             service,
             Checkpoint {
@@ -487,6 +504,55 @@ fn read_cells<V: ckpt::Element>(st: &SafeTensors, name: &str) -> Result<Vec<(Cel
         .collect())
 }
 
+/// `graph.safetensors`: see the module doc.
+fn save_graph(graph: &LatentGraph) -> Result<Vec<u8>, String> {
+    let keys = Array::from_iter(
+        vec![graph.n_nodes(), 2],
+        graph.keys().iter().flat_map(|k| k.0),
+    )?;
+    let edges = Array::from_iter(
+        vec![graph.n_edges(), 3],
+        graph.edges().iter().flat_map(|&(a, b, w)| [a, b, w]),
+    )?;
+    let metadata = HashMap::from([
+        (
+            "dropped_cells".to_owned(),
+            graph.n_dropped_cells().to_string(),
+        ),
+        (
+            "unmapped_states".to_owned(),
+            graph.n_unmapped_states().to_string(),
+        ),
+    ]);
+    ckpt::serialize(
+        vec![("keys".to_owned(), &keys), ("edges".to_owned(), &edges)],
+        metadata,
+    )
+}
+
+/// The graph saved by [`save_graph`], on `grid`; checked as [`LatentGraph::from_parts`] does.
+fn restore_graph(grid: Grid, bytes: &[u8]) -> Result<LatentGraph, String> {
+    let (st, metadata) = ckpt::parse(bytes)?;
+    let keys = array::<i32>(&st, "keys", None)?;
+    let edges = array::<u32>(&st, "edges", None)?;
+    if keys.len() % 2 != 0 || edges.len() % 3 != 0 {
+        return Err(format!(
+            "{} key values and {} edge values: not [n, 2] and [m, 3]",
+            keys.len(),
+            edges.len()
+        ));
+    }
+    LatentGraph::from_parts(
+        grid,
+        keys.chunks_exact(2)
+            .map(|k| CellKey([k[0], k[1]]))
+            .collect(),
+        edges.chunks_exact(3).map(|e| (e[0], e[1], e[2])).collect(),
+        meta(&metadata, "dropped_cells")?,
+        meta(&metadata, "unmapped_states")?,
+    )
+}
+
 /// `maps.safetensors`: see the module doc.
 fn save_maps(service: &GraphService) -> Result<Vec<u8>, String> {
     let hess = service.hess.parts();
@@ -561,6 +627,10 @@ fn restore_maps(service: &mut GraphService, bytes: &[u8]) -> Result<(), String> 
 struct SavedState {
     phi_version: u64,
     graph_version: u64,
+    /// The graph is in `graph.safetensors` (none there: there was no graph); false in
+    /// checkpoints written before graphs were saved, whose restore rebuilds it.
+    #[serde(default)]
+    graph_saved: bool,
     rng: Pcg64,
     chunks: u64,
     rejected_chunks: u64,
@@ -579,6 +649,7 @@ impl SavedState {
         Self {
             phi_version: service.phi_version().0,
             graph_version: service.graph_version,
+            graph_saved: true,
             rng: service.rng.clone(),
             chunks: s.chunks,
             rejected_chunks: s.rejected_chunks,
@@ -592,7 +663,7 @@ impl SavedState {
         }
     }
 
-    /// Sets the counters, generator and graph version (the rebuild after it adds one).
+    /// Sets the counters, generator and graph version (a rebuild after it adds one).
     fn apply(self, service: &mut GraphService) {
         service.graph_version = self.graph_version;
         service.rng = self.rng;

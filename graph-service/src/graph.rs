@@ -289,7 +289,71 @@ impl GraphBuilder {
             .map(|((a, b), w)| (a, b, w))
             .collect();
         edges.sort_unstable();
-        let mut lists = vec![Vec::new(); self.keys.len()];
+        LatentGraph::assemble(
+            self.grid,
+            self.keys,
+            self.index,
+            edges,
+            [self.dropped_cells.len() as u64, self.n_unmapped_states],
+        )
+    }
+}
+
+impl LatentGraph {
+    /// The graph with these nodes (cell keys by node id) and edges (`(a, b, weight)`, `a < b`,
+    /// sorted), as [`LatentGraph::keys`] and [`LatentGraph::edges`] give them, and the counts of
+    /// cells dropped by the node cap and of unmapped states: a graph saved in a checkpoint.
+    /// Refused with a message when the parts could not come from a built graph (a key twice,
+    /// an edge that is a self pair, names a missing node, has weight 0, or is out of order).
+    pub fn from_parts(
+        grid: Grid,
+        keys: Vec<CellKey>,
+        edges: Vec<(NodeId, NodeId, EdgeWeight)>,
+        n_dropped_cells: u64,
+        n_unmapped_states: u64,
+    ) -> Result<Self, String> {
+        let n = keys.len();
+        if NodeId::try_from(n).is_err() {
+            return Err(format!("{n} nodes: more than node ids can number"));
+        }
+        let mut index = HashMap::with_capacity(n);
+        for (node, &key) in keys.iter().enumerate() {
+            if index.insert(key, node as NodeId).is_some() {
+                return Err(format!(
+                    "cell {:?} is node {node} and an earlier one",
+                    key.0
+                ));
+            }
+        }
+        for (i, &(a, b, w)) in edges.iter().enumerate() {
+            if a >= b || b as usize >= n || w == 0 {
+                return Err(format!(
+                    "edge {i} ({a}, {b}, weight {w}) is not (a, b) with a < b < {n} nodes and a \
+                     weight of at least 1"
+                ));
+            }
+            if i > 0 && edges[i - 1] >= (a, b, w) {
+                return Err(format!("edge {i} ({a}, {b}) is out of order or repeated"));
+            }
+        }
+        Ok(Self::assemble(
+            grid,
+            keys,
+            index,
+            edges,
+            [n_dropped_cells, n_unmapped_states],
+        ))
+    }
+
+    /// The graph of checked parts: the neighbour lists from the sorted edges.
+    fn assemble(
+        grid: Grid,
+        keys: Vec<CellKey>,
+        index: HashMap<CellKey, NodeId>,
+        edges: Vec<(NodeId, NodeId, EdgeWeight)>,
+        [n_dropped_cells, n_unmapped_states]: [u64; 2],
+    ) -> Self {
+        let mut lists = vec![Vec::new(); keys.len()];
         for &(a, b, w) in &edges {
             lists[a as usize].push((b, w));
             lists[b as usize].push((a, w));
@@ -298,14 +362,14 @@ impl GraphBuilder {
             list.sort_unstable();
         }
         let adjacency = Adjacency::from_lists(&lists);
-        LatentGraph {
-            grid: self.grid,
-            keys: self.keys,
-            index: self.index,
+        Self {
+            grid,
+            keys,
+            index,
             adjacency,
             edges,
-            n_dropped_cells: self.dropped_cells.len() as u64,
-            n_unmapped_states: self.n_unmapped_states,
+            n_dropped_cells,
+            n_unmapped_states,
             route_table: Arc::default(),
         }
     }
@@ -432,5 +496,66 @@ mod tests {
         assert_eq!(g.n_nodes(), 2);
         assert_eq!(g.n_dropped_cells(), 2);
         assert_eq!(g.n_edges(), 1);
+    }
+
+    /// The parts of `g` through [`LatentGraph::from_parts`].
+    fn rebuilt(g: &LatentGraph) -> Result<LatentGraph, String> {
+        LatentGraph::from_parts(
+            g.grid,
+            g.keys().to_vec(),
+            g.edges().to_vec(),
+            g.n_dropped_cells(),
+            g.n_unmapped_states(),
+        )
+    }
+
+    #[test]
+    fn a_graph_from_its_parts_is_the_same_graph() {
+        let t = [
+            at(0, 0),
+            at(1, 0),
+            at(1, 1),
+            at(0, 0),
+            at(5, 5),
+            at(2, 0),
+            at(2, 1),
+        ];
+        let g = build(3, 5, &[&t, &[at(1, 1), at(2, 1)]]);
+        assert!(g.n_dropped_cells() > 0 && g.n_edges() > 4, "{g:?}");
+        let h = rebuilt(&g).unwrap();
+        assert_eq!(h.keys(), g.keys());
+        assert_eq!(h.edges(), g.edges());
+        assert_eq!(h.adjacency(), g.adjacency());
+        assert_eq!(
+            (h.n_dropped_cells(), h.n_unmapped_states()),
+            (g.n_dropped_cells(), g.n_unmapped_states())
+        );
+        for (node, &key) in g.keys().iter().enumerate() {
+            assert_eq!(h.node_of_key(key), Some(node as NodeId));
+        }
+    }
+
+    #[test]
+    fn parts_no_built_graph_could_have_are_refused() {
+        let g = build(1, 10, &[&[at(0, 0), at(1, 0), at(2, 0)]]);
+        assert_eq!(g.edges(), &[(0, 1, 1), (1, 2, 1)]);
+        let keys = g.keys().to_vec();
+        let with_edges = |edges: Vec<(NodeId, NodeId, EdgeWeight)>| {
+            LatentGraph::from_parts(g.grid, keys.clone(), edges, 0, 0)
+        };
+        for (edges, problem) in [
+            (vec![(1, 1, 1)], "a < b"),
+            (vec![(1, 0, 1)], "a < b"),
+            (vec![(0, 3, 1)], "< 3 nodes"),
+            (vec![(0, 1, 0)], "weight of at least 1"),
+            (vec![(1, 2, 1), (0, 1, 1)], "out of order"),
+            (vec![(0, 1, 1), (0, 1, 1)], "repeated"),
+        ] {
+            let err = with_edges(edges.clone()).unwrap_err();
+            assert!(err.contains(problem), "{edges:?}: {err}");
+        }
+        let twice = vec![keys[0], keys[1], keys[0]];
+        let err = LatentGraph::from_parts(g.grid, twice, Vec::new(), 0, 0).unwrap_err();
+        assert!(err.contains("node 2 and an earlier one"), "{err}");
     }
 }

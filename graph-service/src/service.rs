@@ -285,13 +285,17 @@ impl GraphService {
         for trajectory in self.store.trajectories() {
             builder.add_trajectory(trajectory.latents());
         }
-        let graph = builder.finish();
+        self.set_graph(builder.finish());
+        self.graph_version += 1;
+    }
+
+    /// Makes `graph` the current graph and starts the background build of its route table.
+    pub(crate) fn set_graph(&mut self, graph: LatentGraph) {
         if graph.n_nodes() <= self.route_table_max_nodes {
             // Without the table routes are searched per query: slower, same answers.
             let _ = graph.spawn_route_table(self.remap_threads);
         }
         self.graph = Some(graph);
-        self.graph_version += 1;
     }
 
     /// Recounts visits from the store.

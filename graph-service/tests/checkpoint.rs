@@ -117,21 +117,8 @@ fn a_restored_service_holds_the_same_state_and_gives_the_same_answers() {
     assert_eq!(restored.hess(), original.hess());
     assert_eq!(restored.phi_version(), original.phi_version());
     let (a, b) = (original.stats(), restored.stats());
-    assert_eq!(
-        b.graph_version,
-        a.graph_version + 1,
-        "the restore rebuilds the graph"
-    );
-    assert_eq!(
-        graph_service::GraphStats {
-            graph_version: 0,
-            ..b
-        },
-        graph_service::GraphStats {
-            graph_version: 0,
-            ..a.clone()
-        }
-    );
+    assert_eq!(b, a, "the graph and its version as saved");
+    assert_same_graph(&restored, &original);
     assert!(
         a.reach_samples == 2 && a.chunk_gaps == 1 && a.stored_steps > 20,
         "{a:?}"
@@ -171,7 +158,124 @@ fn a_service_without_weights_round_trips_and_keeps_no_phi_file() {
     let (restored, _) = GraphService::restore(&ckpt.path, &config, dims()).unwrap();
     assert_eq!(restored.store(), s.store());
     assert_eq!(restored.phi_version().0, 0);
-    assert_eq!(restored.graph().map(|g| g.n_nodes()), Some(3));
+    // No graph before the first rebuild, and none after the restore.
+    assert!(s.graph().is_none() && restored.graph().is_none());
+    assert!(ckpt
+        .manifest
+        .files
+        .iter()
+        .all(|f| f.name != "graph.safetensors"));
+    remove(&dir);
+}
+
+/// The graphs of `a` and `b` are the same: nodes, edges, dropped cells and unmapped states.
+fn assert_same_graph(a: &GraphService, b: &GraphService) {
+    let (a, b) = (a.graph().unwrap(), b.graph().unwrap());
+    assert_eq!(a.keys(), b.keys());
+    assert_eq!(a.edges(), b.edges());
+    assert_eq!(a.adjacency(), b.adjacency());
+    assert_eq!(
+        (a.n_dropped_cells(), a.n_unmapped_states()),
+        (b.n_dropped_cells(), b.n_unmapped_states())
+    );
+}
+
+/// `busy_service` with an episode in new cells stored after its last rebuild: its graph lags
+/// its store, as a running service's does between φ re-maps.
+fn lagging_service() -> GraphService {
+    let mut s = busy_service();
+    let nodes = s.graph().unwrap().n_nodes();
+    ingest_episode(&mut s, 3, 0, &[at(10, 10), at(10, 11), at(11, 11)]);
+    assert_eq!(s.graph().unwrap().n_nodes(), nodes, "no rebuild on ingest");
+    s
+}
+
+#[test]
+fn a_graph_that_lags_the_store_is_restored_as_it_was_not_rebuilt() {
+    let dir = scratch("lagging-graph");
+    let config = config();
+    let mut original = lagging_service();
+    let ckpt = original.save(&dir).unwrap();
+    let (mut restored, _) = GraphService::restore(&ckpt.path, &config, dims()).unwrap();
+    assert_eq!(restored.stats(), original.stats());
+    assert_same_graph(&restored, &original);
+    // The new cells are stored and counted but in neither graph: from one of them no route.
+    let far = [21.0, 21.0]; // φ = 2·xy of at(10, 10)
+    assert_eq!(restored.visits(far), Some(1));
+    assert!(restored.graph().unwrap().node_at(far).is_none());
+    assert_eq!(answers(&mut restored), answers(&mut original));
+    // A rebuild (what a restore did before graphs were saved) takes them in.
+    let nodes = original.graph().unwrap().n_nodes();
+    restored.rebuild();
+    assert_eq!(restored.graph().unwrap().n_nodes(), nodes + 3);
+    remove(&dir);
+}
+
+#[test]
+fn a_checkpoint_from_before_graphs_were_saved_rebuilds_the_graph_from_the_store() {
+    let dir = scratch("no-graph-file");
+    let original = lagging_service();
+    let path = original.save(&dir).unwrap().path;
+    // As an older writer wrote it: no graph file, no `graph_saved` in state.json.
+    fs::remove_file(path.join("graph.safetensors")).unwrap();
+    let file = path.join("state.json");
+    // Edited as text: the generator's 128-bit numbers do not survive a serde_json::Value.
+    let state = fs::read_to_string(&file).unwrap();
+    let line = "\n  \"graph_saved\": true,";
+    assert!(state.contains(line), "{state}");
+    let older = state.replacen(line, "", 1).into_bytes();
+    fs::write(&file, &older).unwrap();
+    edit_manifest(&path, |m| {
+        m.files.retain(|f| f.name != "graph.safetensors");
+        let entry = m.files.iter_mut().find(|f| f.name == "state.json").unwrap();
+        *entry = ckpt::FileEntry::of("state.json", &older);
+    });
+    let (restored, _) = GraphService::restore(&path, &config(), dims()).unwrap();
+    let (a, b) = (original.stats(), restored.stats());
+    assert_eq!(b.graph_version, a.graph_version + 1, "one rebuild");
+    assert_eq!(b.n_nodes, a.n_nodes + 3, "from the whole store");
+    remove(&dir);
+}
+
+#[test]
+fn a_graph_file_no_built_graph_could_have_is_refused_as_corrupt() {
+    let (dir, path) = saved("bad-graph");
+    let file = path.join("graph.safetensors");
+    let (st, metadata) = {
+        let bytes = fs::read(&file).unwrap();
+        let (st, metadata) = ckpt::parse(&bytes).unwrap();
+        let edges: Vec<u32> = ckpt::array(&st, "edges", None).unwrap();
+        assert!(edges.len() >= 3, "busy_service's graph has edges");
+        (edges, metadata)
+    };
+    // The first edge turned round (b, a): a writer of this format never writes it.
+    let mut edges = st;
+    edges.swap(0, 1);
+    let keys = {
+        let bytes = fs::read(&file).unwrap();
+        let (st, _) = ckpt::parse(&bytes).unwrap();
+        ckpt::array::<i32>(&st, "keys", None).unwrap()
+    };
+    let keys = ckpt::Array::from_iter(vec![keys.len() / 2, 2], keys).unwrap();
+    let edges = ckpt::Array::from_iter(vec![edges.len() / 3, 3], edges).unwrap();
+    let tensors = vec![("keys".to_owned(), &keys), ("edges".to_owned(), &edges)];
+    let bad = ckpt::serialize(tensors, metadata).unwrap();
+    fs::write(&file, &bad).unwrap();
+    edit_manifest(&path, |m| {
+        let entry = m
+            .files
+            .iter_mut()
+            .find(|f| f.name == "graph.safetensors")
+            .unwrap();
+        *entry = ckpt::FileEntry::of("graph.safetensors", &bad);
+    });
+    match restore_err(&path) {
+        CheckpointError::File(FileError::Corrupt { path, problem }) => {
+            assert_eq!(path, file);
+            assert!(problem.contains("a < b"), "{problem}");
+        }
+        other => panic!("expected Corrupt, got {other}"),
+    }
     remove(&dir);
 }
 
