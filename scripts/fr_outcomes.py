@@ -6,8 +6,12 @@
 Reads each run's metrics.jsonl (standard library only) and takes one record per finished FR
 episode of actor 0 from the `actor0/actor/fr/last_*` values (docs/METRICS.md): how its
 navigation ended (near the frontier, stuck, new phi, or still navigating when the episode
-ended) and where (`last_x`, `last_y`). Positions are measured along the maze from the start,
-s in metres (scripts/maze_path.py, on the maze of the run's task: in AntMaze-U the centreline
+ended) and where (`last_x`, `last_y`). Those values are of the last FR episode before each
+metrics line, so an FR episode that finished between two lines with another is missed; runs
+whose lines carry the outcome counters (`actor/fr/near_frontier_switches`,
+`stuck_while_navigating`, `new_phi_while_navigating`, `navigating_at_end`; builds from 1118c0e
+on) also get the exact count of each outcome per stretch from them. Positions are measured
+along the maze from the start, s in metres (scripts/maze_path.py, on the maze of the run's task: in AntMaze-U the centreline
 (0, 0) -> (8, 0) -> (8, 8) -> (0, 8), the test goal at s = 24). Runs of builds before these
 metrics existed print no FR episodes.
 
@@ -44,6 +48,13 @@ import maze_path
 
 PREFIX = "actor0/actor/fr/"
 OUTCOMES = {0: "near frontier", 1: "stuck", 2: "new phi", 3: "still navigating"}
+# The counter of each outcome (builds from 1118c0e on): every finished FR episode counts one.
+OUTCOME_COUNTERS = {
+    0: "near_frontier_switches",
+    1: "stuck_while_navigating",
+    2: "new_phi_while_navigating",
+    3: "navigating_at_end",
+}
 COVERAGE = "learner/charts/coverage"
 STRETCHES = [(201, 500), (501, 1000), (1001, 1500), (1501, 2000)]
 
@@ -90,6 +101,36 @@ def episode_ends(path, maze):
                 maze.progress(record["actor0/actor/last_episode_x"], record["actor0/actor/last_episode_y"]),
             )
     return list(seen.values())
+
+
+def outcome_counts(path, stretches):
+    """{(lo, hi): [count of each outcome code]} from actor 0's outcome counters: each counter's
+    rise from the last line before training episode `lo` to the last line at or before `hi`.
+    Exact, where `fr_episodes` sees only the last FR episode of each metrics line. {} for runs
+    whose lines lack the counters (builds before 1118c0e)."""
+    keys = [PREFIX + OUTCOME_COUNTERS[code] for code in sorted(OUTCOME_COUNTERS)]
+    lines = []
+    for record in records(path):
+        if record.get(keys[1]) is None or record.get("learner/schedule/train_episodes") is None:
+            continue
+        lines.append((record["learner/schedule/train_episodes"], [record.get(k, 0) for k in keys]))
+    if not lines:
+        return {}
+
+    def at(episode):
+        """The counters of the last line at or before `episode` (zeros before the first)."""
+        found = [0] * len(keys)
+        for train, counts in lines:
+            if train > episode:
+                break
+            found = counts
+        return found
+
+    return {
+        (lo, hi): [int(b - a) for a, b in zip(at(lo - 1), at(hi))]
+        for lo, hi in stretches
+        if lines[0][0] <= hi and lo <= lines[-1][0]
+    }
 
 
 def coverage_gains(path):
@@ -219,6 +260,16 @@ def main(args):
                 f"  {lo}-{hi}: n={len(stretch)} | {shares} | s median {statistics.median(e[2] for e in stretch):.1f} m"
                 f" (still navigating: {nav_median} m), max {max(e[2] for e in stretch):.1f} m"
             )
+        counted = outcome_counts(f"{run}/metrics.jsonl", stretches)
+        if counted:
+            print("  outcomes counted (all finished FR episodes of actor 0):")
+        for (lo, hi), counts in counted.items():
+            total = sum(counts)
+            shares = " ".join(
+                f"{OUTCOMES[code]} {counts[code] / total:.0%}" if total else f"{OUTCOMES[code]} -"
+                for code in OUTCOMES
+            )
+            print(f"  {lo}-{hi}: n={total} | {shares}")
         ends = episode_ends(f"{run}/metrics.jsonl", maze)
         if ends:
             print(f"  where episodes ended ({len(ends)} recorded), median s:")

@@ -228,6 +228,42 @@ class CoverageGains(unittest.TestCase):
             self.assertAlmostEqual(got, want, places=9)
 
 
+class OutcomeCounts(unittest.TestCase):
+    def test_each_stretch_counts_the_rise_of_the_counters(self):
+        # (train episode, near frontier, stuck, new phi, navigating at end)
+        records = [
+            (3, 0, 0, 0, 0),
+            (5, 1, 0, 0, 1),
+            (8, 2, 1, 0, 1),
+            (10, 4, 1, 1, 2),
+            (14, 4, 3, 1, 2),
+        ]
+        handle = tempfile.NamedTemporaryFile("w", suffix=".jsonl", delete=False)
+        handle.write(json.dumps({"learner/schedule/train_episodes": 1}) + "\n")  # before FR
+        for train, *counts in records:
+            record = {"learner/schedule/train_episodes": train}
+            for code, count in enumerate(counts):
+                record["actor0/actor/fr/" + fr_outcomes.OUTCOME_COUNTERS[code]] = count
+            handle.write(json.dumps(record) + "\n")
+        handle.write("{cut by a kill\n")
+        handle.close()
+        try:
+            got = fr_outcomes.outcome_counts(handle.name, [(1, 5), (6, 10), (11, 20), (30, 40)])
+        finally:
+            os.unlink(handle.name)
+        # 1-5: zeros before -> line 5; 6-10: line 5 -> line 10; 11-20: line 10 -> line 14;
+        # 30-40 lies after the last line and is left out.
+        self.assertEqual(got, {(1, 5): [1, 0, 0, 1], (6, 10): [3, 1, 1, 1], (11, 20): [0, 2, 0, 0]})
+
+    def test_runs_without_the_counters_give_nothing(self):
+        handle = tempfile.NamedTemporaryFile("w", suffix=".jsonl", delete=False)
+        handle.write(json.dumps({"learner/schedule/train_episodes": 4, "actor0/actor/fr/last_outcome": 1}) + "\n")
+        handle.close()
+        try:
+            self.assertEqual(fr_outcomes.outcome_counts(handle.name, [(1, 10)]), {})
+        finally:
+            os.unlink(handle.name)
+
 
 class FarGoalSuccesses(unittest.TestCase):
     def test_successes_split_fr_and_ordinary_across_a_window_close(self):
