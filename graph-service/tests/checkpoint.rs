@@ -241,21 +241,13 @@ fn a_checkpoint_from_before_graphs_were_saved_rebuilds_the_graph_from_the_store(
 fn a_graph_file_no_built_graph_could_have_is_refused_as_corrupt() {
     let (dir, path) = saved("bad-graph");
     let file = path.join("graph.safetensors");
-    let (st, metadata) = {
-        let bytes = fs::read(&file).unwrap();
-        let (st, metadata) = ckpt::parse(&bytes).unwrap();
-        let edges: Vec<u32> = ckpt::array(&st, "edges", None).unwrap();
-        assert!(edges.len() >= 3, "busy_service's graph has edges");
-        (edges, metadata)
-    };
+    let bytes = fs::read(&file).unwrap();
+    let (st, metadata) = ckpt::parse(&bytes).unwrap();
+    let keys: Vec<i32> = ckpt::array(&st, "keys", None).unwrap();
+    let mut edges: Vec<u32> = ckpt::array(&st, "edges", None).unwrap();
+    assert!(edges.len() >= 3, "busy_service's graph has edges");
     // The first edge turned round (b, a): a writer of this format never writes it.
-    let mut edges = st;
     edges.swap(0, 1);
-    let keys = {
-        let bytes = fs::read(&file).unwrap();
-        let (st, _) = ckpt::parse(&bytes).unwrap();
-        ckpt::array::<i32>(&st, "keys", None).unwrap()
-    };
     let keys = ckpt::Array::from_iter(vec![keys.len() / 2, 2], keys).unwrap();
     let edges = ckpt::Array::from_iter(vec![edges.len() / 3, 3], edges).unwrap();
     let tensors = vec![("keys".to_owned(), &keys), ("edges".to_owned(), &edges)];
