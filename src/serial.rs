@@ -1,12 +1,15 @@
 //! `asi train --serial`: the same components as the process mode (actors, learner,
-//! graph-service) driven by one loop in one process, with no transport and no clock in the
-//! loop, so a run is deterministic for its seed: two runs with the same config produce
+//! graph-service) driven by one loop in one process, with no transport and no clock in what the
+//! loop computes, so a run is deterministic for its seed: two runs with the same config produce
 //! identical `metrics.jsonl` files. Meant for debugging and for tests. Actors ask the
 //! graph-service (HESS exploration, reaching reports) by calling its request handler directly,
 //! with the same encoded messages as in process mode, and so does the learner for its
 //! self-imitation routes. Evaluations run inline when they fall due (same schedule and outputs
 //! as the evaluator process). One metrics line is written after each round of actor chunks in
 //! which episodes completed (and a last one at the end if anything changed since).
+//!
+//! Progress goes to the terminal ([`progress`]: episodes against the budget, rates, time left,
+//! coverage, the latest evaluation), or to the log once a minute when stderr is not one.
 //!
 //! Checkpoints and resume (issue #7). A checkpoint has three parts: the learner's
 //! (`checkpoints/ckpt-N/`), the graph-service's (`checkpoints/graph-service/`) and the serial
@@ -57,6 +60,7 @@ use crate::run::RunContext;
 use crate::weights_file::WeightsSaver;
 
 mod checkpoint;
+mod progress;
 
 use checkpoint::GraphInput;
 
@@ -89,11 +93,14 @@ pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
     let mut serial = Serial::open(ctx)?;
     let mut checkpoints = crate::run::CheckpointTimer::new(&serial.ctx.config);
     install_stop_handlers();
+    let mut progress = progress::Progress::new();
     let mut waiting_logged = false;
     let mut stopped = false;
     while !budget_reached(&serial.ctx.config, &serial.learner) {
         serial.round()?;
-        serial.line_if_episodes_ended()?;
+        if serial.line_if_episodes_ended()? {
+            progress.show(&serial.figures());
+        }
         // Checkpoints and stops wait for a round boundary with no open episode, so that no
         // environment state needs saving; they read state only, so the run's metrics do not
         // depend on when they fall.
@@ -129,6 +136,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
         }
         serial.picture.tick(episodes, &serial.graph.service);
     }
+    progress.finish(&serial.figures());
     serial.finish(stopped)?;
     Ok(stopped)
 }
@@ -269,14 +277,33 @@ impl Serial {
         self_imitate(learner, &mut self.graph)
     }
 
-    /// A metrics line if episodes completed since the last one.
-    fn line_if_episodes_ended(&mut self) -> anyhow::Result<()> {
+    /// A metrics line if episodes completed since the last one; whether one was written.
+    fn line_if_episodes_ended(&mut self) -> anyhow::Result<bool> {
         let episodes = self.learner.ingest_stats().episodes_completed;
-        if episodes != self.last_episodes {
-            self.write_line()?;
-            self.last_episodes = episodes;
+        if episodes == self.last_episodes {
+            return Ok(false);
         }
-        Ok(())
+        self.write_line()?;
+        self.last_episodes = episodes;
+        Ok(true)
+    }
+
+    /// What the progress line shows.
+    fn figures(&self) -> progress::Figures {
+        let config = &self.ctx.config;
+        let value = |values: &[(String, f64)], key: &str| {
+            values.iter().find(|(k, _)| k == key).map(|&(_, v)| v)
+        };
+        let eval = &self.eval.latest;
+        progress::Figures {
+            episodes: self.learner.ingest_stats().episodes_completed,
+            max_episodes: config.run.max_episodes,
+            env_steps: self.learner.progress().env_steps_ingested,
+            max_env_steps: config.run.max_env_steps,
+            coverage: value(&self.coverage.metrics(), "charts/coverage"),
+            eval: value(eval, "eval/success_rate")
+                .zip(value(eval, "eval/train_episodes").map(|e| e as u64)),
+        }
     }
 
     fn write_line(&mut self) -> anyhow::Result<()> {
