@@ -24,7 +24,7 @@
 use envs::api::{Env, Reset, Step};
 use protocol::config::FrPotentialReports;
 use protocol::graph::ReachSample;
-use protocol::{DecisionKind, EpisodeId, LatentPoint, PhiVersion, TrajectoryFlags};
+use protocol::{DecisionKind, EpisodeId, LatentPoint, PhiVersion, StepView, TrajectoryFlags};
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 
@@ -35,7 +35,7 @@ use crate::frontier::{
 };
 use crate::networks::ActorNets;
 use crate::oracle::GraphOracle;
-use crate::record::{RecordWriter, StepFields};
+use crate::record::RecordWriter;
 use crate::subgoal::{DecisionInputs, SubgoalPlan, SubgoalSource};
 
 /// Fixed per-run parameters of stepping.
@@ -475,7 +475,7 @@ impl Episode {
         } else {
             &rollout.zeros
         };
-        let fields = StepFields {
+        let fields = StepView {
             obs: &self.obs,
             next_obs: &step.obs,
             phi: &self.phi,

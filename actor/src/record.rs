@@ -7,25 +7,7 @@
 
 use std::ops::Range;
 
-use protocol::{DecisionKind, ProtocolError, StepLayout};
-
-/// One step's values, borrowed from the actor's buffers.
-pub(crate) struct StepFields<'a> {
-    pub obs: &'a [f32],
-    pub next_obs: &'a [f32],
-    pub phi: &'a [f32],
-    pub next_phi: &'a [f32],
-    pub subgoal: &'a [f32],
-    pub high_action: &'a [f32],
-    pub action: &'a [f32],
-    pub goal: &'a [f32],
-    pub achieved_goal: &'a [f32],
-    pub reward: f32,
-    pub decision: DecisionKind,
-    pub success: bool,
-    pub terminated: bool,
-    pub truncated: bool,
-}
+use protocol::{ProtocolError, StepLayout, StepView};
 
 /// A non-finite value found while writing a record.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,9 +58,9 @@ impl RecordWriter {
         Ok(Self { vectors, scalars })
     }
 
-    /// Writes `step` into `out` (one record long). Lengths are the caller's invariant (the
+    /// Writes `step` (the actor's buffers, borrowed) into `out` (one record long). Lengths are the caller's invariant (the
     /// actor's buffers are sized from the same layout); finiteness is checked.
-    pub fn write(&self, step: &StepFields<'_>, out: &mut [f32]) -> Result<(), NonFiniteField> {
+    pub fn write(&self, step: &StepView<'_>, out: &mut [f32]) -> Result<(), NonFiniteField> {
         let vectors = [
             step.obs,
             step.next_obs,

@@ -114,7 +114,8 @@ pub struct StepRecord {
     pub truncated: bool,
 }
 
-/// One step, borrowed from a received slice (zero-copy). Produced by [`StepLayout::view`].
+/// One step, borrowed: from a received slice (zero-copy, produced by [`StepLayout::view`]), or
+/// from an actor's buffers to be written into a chunk.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StepView<'a> {
     /// s_t.
