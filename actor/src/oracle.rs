@@ -88,6 +88,7 @@ pub trait GraphOracle {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct NoGraph;
 
+/// Its frontier and least-visited answers are the trait's defaults: none.
 impl GraphOracle for NoGraph {
     fn explore(
         &mut self,
@@ -104,22 +105,6 @@ impl GraphOracle for NoGraph {
         _phi_version: PhiVersion,
     ) -> Result<bool, ActorError> {
         Ok(false)
-    }
-
-    fn frontier_route(
-        &mut self,
-        _from: LatentPoint,
-        _phi_version: PhiVersion,
-    ) -> Result<Option<FrontierRoute>, ActorError> {
-        Ok(None)
-    }
-
-    fn least_visited(
-        &mut self,
-        _candidates: &[LatentPoint],
-        _phi_version: PhiVersion,
-    ) -> Result<Option<LeastVisitedAnswer>, ActorError> {
-        Ok(None)
     }
 }
 
