@@ -24,23 +24,6 @@ fn small_set(seed: u64) -> VarMap {
     vm
 }
 
-fn snapshot(vm: &VarMap) -> Vec<(String, Vec<u32>)> {
-    let mut out: Vec<(String, Vec<u32>)> = vm
-        .data()
-        .lock()
-        .unwrap()
-        .iter()
-        .map(|(n, v)| {
-            (
-                n.clone(),
-                flat(v.as_tensor()).iter().map(|x| x.to_bits()).collect(),
-            )
-        })
-        .collect();
-    out.sort();
-    out
-}
-
 /// SplitMix64: a tiny fixed-seed generator for the mutations.
 struct SplitMix(u64);
 
@@ -84,7 +67,7 @@ fn mutated_weight_payloads_load_completely_or_not_at_all() {
             let keep = rng.below(bytes.len() + 1);
             bytes.truncate(keep);
         }
-        let before = snapshot(&target);
+        let before = var_bits(&target);
         match load_safetensors_bytes(&target, &bytes) {
             Ok(()) => {
                 loaded += 1;
@@ -93,8 +76,8 @@ fn mutated_weight_payloads_load_completely_or_not_at_all() {
                 let fresh = small_set(3);
                 load_safetensors_bytes(&fresh, &bytes).unwrap();
                 assert_eq!(
-                    snapshot(&target),
-                    snapshot(&fresh),
+                    var_bits(&target),
+                    var_bits(&fresh),
                     "case {case}: partial load"
                 );
             }
@@ -102,7 +85,7 @@ fn mutated_weight_payloads_load_completely_or_not_at_all() {
                 refused += 1;
                 assert!(!err.to_string().is_empty());
                 assert_eq!(
-                    snapshot(&target),
+                    var_bits(&target),
                     before,
                     "case {case}: refused load changed weights ({err})"
                 );

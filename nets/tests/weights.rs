@@ -16,33 +16,15 @@ fn policy_set(spec: &NetsSpec, seed: u64) -> VarMap {
     vm
 }
 
-/// Every tensor as (name, bit patterns), sorted by name.
-fn bits(vm: &VarMap) -> Vec<(String, Vec<u32>)> {
-    let mut out: Vec<(String, Vec<u32>)> = vm
-        .data()
-        .lock()
-        .unwrap()
-        .iter()
-        .map(|(n, v)| {
-            (
-                n.clone(),
-                flat(v.as_tensor()).iter().map(|x| x.to_bits()).collect(),
-            )
-        })
-        .collect();
-    out.sort();
-    out
-}
-
 #[test]
 fn safetensors_round_trip_preserves_every_tensor_bit_exactly() {
     let spec = NetsSpec::default();
     let source = policy_set(&spec, 1);
     let receiver = policy_set(&spec, 2);
-    assert_ne!(bits(&source), bits(&receiver));
+    assert_ne!(var_bits(&source), var_bits(&receiver));
     let bytes = to_safetensors_bytes(&source).unwrap();
     load_safetensors_bytes(&receiver, &bytes).unwrap();
-    assert_eq!(bits(&source), bits(&receiver));
+    assert_eq!(var_bits(&source), var_bits(&receiver));
     assert_eq!(layout_hash(&source), layout_hash(&receiver));
     assert_eq!(
         to_safetensors_bytes(&receiver).unwrap(),
@@ -54,7 +36,7 @@ fn safetensors_round_trip_preserves_every_tensor_bit_exactly() {
 #[test]
 fn loading_a_wrong_shape_fails_naming_the_tensor_and_changes_nothing() {
     let receiver = policy_set(&NetsSpec::default(), 2);
-    let before = bits(&receiver);
+    let before = var_bits(&receiver);
     let other = policy_set(
         &NetsSpec {
             obs_dim: 30,
@@ -71,7 +53,7 @@ fn loading_a_wrong_shape_fails_naming_the_tensor_and_changes_nothing() {
         "{msg}"
     );
     assert_eq!(
-        bits(&receiver),
+        var_bits(&receiver),
         before,
         "a rejected payload must not change any value"
     );
@@ -142,7 +124,7 @@ fn actor_side_subset_holds_exactly_the_policy_set_and_shares_storage() {
     spec.high_critic(&vb.pp(prefix::HIGH_CRITIC)).unwrap();
     spec.low_critic(&vb.pp(prefix::LOW_CRITIC)).unwrap();
     let actor_side = subset(&full, &prefix::ACTOR_SIDE).unwrap();
-    let names: Vec<String> = bits(&actor_side).into_iter().map(|(n, _)| n).collect();
+    let names: Vec<String> = var_bits(&actor_side).into_iter().map(|(n, _)| n).collect();
     assert!(names.iter().all(|n| !n.contains("critic")), "{names:?}");
     assert_eq!(layout_hash(&actor_side), layout_hash(&policy_set(&spec, 3)));
     // Shared storage: loading into the subset updates the full map.

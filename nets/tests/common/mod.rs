@@ -60,3 +60,22 @@ pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> f32 {
 pub fn batch(batch: usize, dim: usize) -> Tensor {
     Tensor::rand(-1f32, 1.0, (batch, dim), &cpu()).unwrap()
 }
+
+/// Every variable of `vm` as (name, bit patterns), sorted by name: equal exactly when the
+/// weights are bit-identical.
+pub fn var_bits(vm: &VarMap) -> Vec<(String, Vec<u32>)> {
+    let mut out: Vec<(String, Vec<u32>)> = vm
+        .data()
+        .lock()
+        .unwrap()
+        .iter()
+        .map(|(n, v)| {
+            (
+                n.clone(),
+                flat(v.as_tensor()).iter().map(|x| x.to_bits()).collect(),
+            )
+        })
+        .collect();
+    out.sort();
+    out
+}
