@@ -1,6 +1,9 @@
 //! The actor state machine on the real point-maze task: chunk shapes, episode bookkeeping,
 //! φ labels, subgoal holding, determinism, physics failures and weights loading.
 
+mod common;
+use common::*;
+
 use actor::{Actor, ActorError, Chunk, NoGraph};
 use candle_core::Device;
 use candle_nn::VarMap;
@@ -12,55 +15,10 @@ use protocol::{
     WeightsHeader,
 };
 
-/// Point maze U, small networks, c = 10, episodes of `episode_length` steps cut every
-/// `chunk_steps`, one random-subgoal episode before the policy takes over.
-fn config(chunk_steps: u32, episode_length: u32) -> Config {
-    let mut config = Config::default();
-    config.env.task = "pointmaze-u".into();
-    config.env.episode_length = Some(episode_length);
-    config.transport.chunk_steps = chunk_steps;
-    config.hierarchy.c = 10;
-    config.learner.high.random_episodes = 1;
-    config.learner.high.hidden = vec![32, 32];
-    config.learner.low.hidden = vec![32, 32];
-    config.encoder.hidden = vec![16, 16];
-    config
-}
-
-fn decode(chunk: &Chunk) -> Vec<StepRecord> {
-    let layout = chunk
-        .header
-        .check(chunk.records.len())
-        .expect("header matches payload");
-    let views = layout
-        .view_chunk(&chunk.records, chunk.header.n_steps as usize)
-        .expect("records decode");
-    views.iter().map(|v| v.to_record()).collect()
-}
-
-/// Chunks of the next `n` episodes, grouped by episode.
-fn episodes(actor: &mut Actor, n: usize) -> Vec<Vec<Chunk>> {
-    let mut out = vec![Vec::new()];
-    while out.len() <= n {
-        let chunk = actor.next_chunk(&mut NoGraph).unwrap();
-        let ended = chunk.header.flags.contains(F::EPISODE_END);
-        out.last_mut().unwrap().push(chunk);
-        if ended {
-            out.push(Vec::new());
-        }
-    }
-    out.pop();
-    out
-}
-
-fn records_of(episode: &[Chunk]) -> Vec<StepRecord> {
-    episode.iter().flat_map(decode).collect()
-}
-
 #[test]
 fn chunks_have_the_configured_lengths_and_every_record_decodes() {
     let mut actor = Actor::new(&config(30, 100), ActorId(3), 1).unwrap();
-    for episode in episodes(&mut actor, 2) {
+    for episode in episodes(&mut actor, &mut NoGraph, 2) {
         let lengths: Vec<u32> = episode.iter().map(|c| c.header.n_steps).collect();
         assert_eq!(lengths, [30, 30, 30, 10]);
         for chunk in &episode {
@@ -81,7 +39,7 @@ fn chunks_have_the_configured_lengths_and_every_record_decodes() {
 #[test]
 fn chunk_indices_increment_and_flags_mark_each_episode_start_and_end_once() {
     let mut actor = Actor::new(&config(40, 100), ActorId(1), 2).unwrap();
-    let episodes = episodes(&mut actor, 3);
+    let episodes = episodes(&mut actor, &mut NoGraph, 3);
     let mut ids = Vec::new();
     for episode in &episodes {
         let id = episode[0].header.episode_id;
@@ -119,7 +77,7 @@ fn chunk_indices_increment_and_flags_mark_each_episode_start_and_end_once() {
 #[test]
 fn phi_of_each_step_is_the_next_phi_of_the_step_before() {
     let mut actor = Actor::new(&config(25, 100), ActorId(0), 3).unwrap();
-    for episode in episodes(&mut actor, 2) {
+    for episode in episodes(&mut actor, &mut NoGraph, 2) {
         let records = records_of(&episode);
         for pair in records.windows(2) {
             assert_eq!(pair[1].phi, pair[0].next_phi);
@@ -131,7 +89,7 @@ fn phi_of_each_step_is_the_next_phi_of_the_step_before() {
 #[test]
 fn the_subgoal_is_held_for_c_steps_and_changes_only_on_decision_steps() {
     let mut actor = Actor::new(&config(30, 100), ActorId(0), 4).unwrap();
-    for (e, episode) in episodes(&mut actor, 2).iter().enumerate() {
+    for (e, episode) in episodes(&mut actor, &mut NoGraph, 2).iter().enumerate() {
         let expected_kind = if e == 0 {
             DecisionKind::Random
         } else {
@@ -181,7 +139,7 @@ fn the_deterministic_low_variant_acts_within_bounds() {
     config.learner.low.deterministic.actor_hidden = vec![32, 32];
     config.learner.low.deterministic.critic_hidden = vec![32, 32];
     let mut actor = Actor::new(&config, ActorId(0), 5).unwrap();
-    let records = records_of(&episodes(&mut actor, 1)[0]);
+    let records = records_of(&episodes(&mut actor, &mut NoGraph, 1)[0]);
     assert_eq!(records.len(), 100);
     assert!(records
         .iter()
@@ -191,7 +149,7 @@ fn the_deterministic_low_variant_acts_within_bounds() {
 #[test]
 fn the_configured_episode_length_is_the_envs_own_even_beyond_the_task_default() {
     let mut actor = Actor::new(&config(100, 600), ActorId(0), 0).unwrap();
-    let episode = &episodes(&mut actor, 1)[0];
+    let episode = &episodes(&mut actor, &mut NoGraph, 1)[0];
     let records = records_of(episode);
     assert_eq!(
         records.len(),
@@ -277,7 +235,7 @@ fn failing_actor(fail_at: u32, every_episode: bool) -> Actor {
 #[test]
 fn a_physics_failure_on_a_chunk_boundary_still_ends_the_episode_in_a_non_empty_chunk() {
     let mut actor = failing_actor(60, false);
-    let episode = &episodes(&mut actor, 1)[0];
+    let episode = &episodes(&mut actor, &mut NoGraph, 1)[0];
     let lengths: Vec<u32> = episode.iter().map(|c| c.header.n_steps).collect();
     assert_eq!(lengths, [30, 30], "the failing step 60 is not recorded");
     let end = episode[1].header.flags;
@@ -484,7 +442,7 @@ fn weights_holding_nan_are_refused_and_change_nothing() {
 #[test]
 fn an_actor_restored_between_episodes_continues_with_the_same_chunks_and_counters() {
     let mut saved = failing_actor(60, true);
-    episodes(&mut saved, 2);
+    episodes(&mut saved, &mut NoGraph, 2);
     assert!(!saved.has_open_episode());
     let state = saved.save_state();
     assert!(!state.had_open_episode);
@@ -495,12 +453,12 @@ fn an_actor_restored_between_episodes_continues_with_the_same_chunks_and_counter
     assert_eq!(restored.stats().n_physics_failures, 2);
     let mut counter_only = failing_actor(60, true);
     counter_only.start_at_episode(2, 0).unwrap();
-    let expected = episodes(&mut saved, 2);
-    assert_eq!(episodes(&mut restored, 2), expected);
+    let expected = episodes(&mut saved, &mut NoGraph, 2);
+    assert_eq!(episodes(&mut restored, &mut NoGraph, 2), expected);
     assert_eq!(restored.stats(), saved.stats());
     assert_eq!(restored.stats().n_physics_failures, 4);
     assert_ne!(
-        episodes(&mut counter_only, 2),
+        episodes(&mut counter_only, &mut NoGraph, 2),
         expected,
         "the episode counter alone does not restore the generator"
     );
@@ -554,7 +512,7 @@ fn the_random_warm_up_is_shared_by_the_actors_and_a_later_start_skips_it() {
     assert_eq!(actor::warm_up_share(&config, 3), 0);
     assert_eq!(actor::warm_up_share(&config, 50), 0);
     let mut actor = Actor::new(&config, ActorId(1), 4).unwrap();
-    let kinds: Vec<Vec<DecisionKind>> = episodes(&mut actor, 3)
+    let kinds: Vec<Vec<DecisionKind>> = episodes(&mut actor, &mut NoGraph, 3)
         .iter()
         .map(|e| decision_kinds(e))
         .collect();
@@ -576,21 +534,21 @@ fn the_random_warm_up_is_shared_by_the_actors_and_a_later_start_skips_it() {
     // One actor takes the whole warm-up.
     config.run.n_actors = 1;
     let mut alone = Actor::new(&config, ActorId(0), 4).unwrap();
-    episodes(&mut alone, 3);
+    episodes(&mut alone, &mut NoGraph, 3);
     assert_eq!(alone.stats().n_random_decisions, 18);
 
     // A restarted or resumed actor (a later incarnation) takes only what the run has left of
     // it: none after the warm-up, its share of the rest during it.
     let mut restarted = Actor::new(&config, ActorId(0), 4).unwrap();
     restarted.start_at_episode(1 << 28, 0).unwrap();
-    let first = episodes(&mut restarted, 1);
+    let first = episodes(&mut restarted, &mut NoGraph, 1);
     assert!(decision_kinds(&first[0])
         .iter()
         .all(|d| *d == DecisionKind::Policy));
     assert_eq!(restarted.stats().n_random_decisions, 0);
     let mut during = Actor::new(&config, ActorId(0), 4).unwrap();
     during.start_at_episode(2 << 28, 1).unwrap();
-    let kinds: Vec<Vec<DecisionKind>> = episodes(&mut during, 2)
+    let kinds: Vec<Vec<DecisionKind>> = episodes(&mut during, &mut NoGraph, 2)
         .iter()
         .map(|e| decision_kinds(e))
         .collect();
@@ -607,13 +565,17 @@ fn the_random_warm_up_is_shared_by_the_actors_and_a_later_start_skips_it() {
 #[test]
 fn a_start_at_episode_0_is_a_fresh_actor_and_a_later_start_draws_other_noise() {
     let config = config(30, 60);
-    let fresh = episodes(&mut Actor::new(&config, ActorId(0), 4).unwrap(), 2);
+    let fresh = episodes(
+        &mut Actor::new(&config, ActorId(0), 4).unwrap(),
+        &mut NoGraph,
+        2,
+    );
     let mut at_zero = Actor::new(&config, ActorId(0), 4).unwrap();
     at_zero
         .start_at_episode(0, actor::warm_up_share(&config, 0))
         .unwrap();
     assert!(
-        episodes(&mut at_zero, 2) == fresh,
+        episodes(&mut at_zero, &mut NoGraph, 2) == fresh,
         "a start at 0 changes nothing"
     );
     // Restored from the state of an actor that started at 2^28 (same env seeds and episode
@@ -625,7 +587,10 @@ fn a_start_at_episode_0_is_a_fresh_actor_and_a_later_start_draws_other_noise() {
     let mut state = Actor::new(&config, ActorId(0), 4).unwrap().save_state();
     state.n_episodes_started = 1 << 28;
     counter_only.restore_state(state).unwrap();
-    let (a, b) = (episodes(&mut later, 1), episodes(&mut counter_only, 1));
+    let (a, b) = (
+        episodes(&mut later, &mut NoGraph, 1),
+        episodes(&mut counter_only, &mut NoGraph, 1),
+    );
     assert_eq!(a[0][0].header.episode_id, b[0][0].header.episode_id);
     assert!(
         a != b,
@@ -641,7 +606,7 @@ fn the_last_episodes_end_position_is_its_last_next_observation() {
         None,
         "no episode finished yet"
     );
-    let second = episodes(&mut actor, 2).pop().unwrap();
+    let second = episodes(&mut actor, &mut NoGraph, 2).pop().unwrap();
     let records = records_of(&second);
     let (first, last) = (&records[0], records.last().unwrap());
     assert!(last.truncated);

@@ -2,6 +2,9 @@
 //! a graph oracle, the run-wide schedule gate, reaching reports, fallbacks, far-goal flags, and
 //! the protocol side of [`ServiceOracle`].
 
+mod common;
+use common::*;
+
 use actor::{
     Actor, ActorError, Chunk, ExploreAnswer, GraphOracle, GraphTransport, NoGraph, ServiceOracle,
 };
@@ -10,20 +13,6 @@ use protocol::{
     ActorId, Config, DecisionKind, GraphRequest, GraphResponse, LatentPoint, PhiVersion,
     PolicyVersion, RunSchedule, StepRecord, TrajectoryFlags as F, WeightsHeader,
 };
-
-/// Point maze U, small networks, c = 10, one random-subgoal episode, then the policy.
-fn config(chunk_steps: u32, episode_length: u32) -> Config {
-    let mut config = Config::default();
-    config.env.task = "pointmaze-u".into();
-    config.env.episode_length = Some(episode_length);
-    config.transport.chunk_steps = chunk_steps;
-    config.hierarchy.c = 10;
-    config.learner.high.random_episodes = 1;
-    config.learner.high.hidden = vec![32, 32];
-    config.learner.low.hidden = vec![32, 32];
-    config.encoder.hidden = vec![16, 16];
-    config
-}
 
 /// An actor of `config(50, 100)` whose own weights were reloaded with `schedule`.
 fn actor_with_schedule(seed: u64, schedule: RunSchedule) -> Actor {
@@ -46,33 +35,6 @@ fn schedule(train_episodes: u64, count_prob: f32) -> RunSchedule {
         count_prob,
         fr_prob: 0.0,
     }
-}
-
-fn decode(chunk: &Chunk) -> Vec<StepRecord> {
-    let layout = chunk.header.check(chunk.records.len()).unwrap();
-    let views = layout
-        .view_chunk(&chunk.records, chunk.header.n_steps as usize)
-        .unwrap();
-    views.iter().map(|v| v.to_record()).collect()
-}
-
-/// Chunks of the next `n` episodes, grouped by episode.
-fn episodes(actor: &mut Actor, oracle: &mut dyn GraphOracle, n: usize) -> Vec<Vec<Chunk>> {
-    let mut out = vec![Vec::new()];
-    while out.len() <= n {
-        let chunk = actor.next_chunk(oracle).unwrap();
-        let ended = chunk.header.flags.contains(F::EPISODE_END);
-        out.last_mut().unwrap().push(chunk);
-        if ended {
-            out.push(Vec::new());
-        }
-    }
-    out.pop();
-    out
-}
-
-fn records_of(episode: &[Chunk]) -> Vec<StepRecord> {
-    episode.iter().flat_map(decode).collect()
 }
 
 /// Answers every explore request with a fixed subgoal and candidate (or nothing), and records

@@ -2,6 +2,9 @@
 //! and FR episodes of a real actor on the point-maze U task with a scripted graph oracle (a test
 //! double for the graph-service; the actor's logic is the real one).
 
+mod common;
+use common::*;
+
 use actor::frontier::{
     assign, count_candidates, nearest_route_index, straight_waypoint_index, waypoint,
     waypoint_index, Assignment, FrChoice, FrEnd, FrOutcome, FrontierEpisode, FrontierParams,
@@ -580,16 +583,7 @@ fn future_count_scoring_is_accepted_and_left_to_the_graph_service() {
 
 /// Point maze U, small networks, c = 10, 100 steps: 10 decisions per episode.
 fn config() -> Config {
-    let mut config = Config::default();
-    config.env.task = "pointmaze-u".into();
-    config.env.episode_length = Some(100);
-    config.transport.chunk_steps = 50;
-    config.hierarchy.c = 10;
-    config.learner.high.random_episodes = 1;
-    config.learner.high.hidden = vec![32, 32];
-    config.learner.low.hidden = vec![32, 32];
-    config.encoder.hidden = vec![16, 16];
-    config
+    common::config(50, 100)
 }
 
 fn fr_schedule(fr_prob: f32) -> RunSchedule {
@@ -617,27 +611,6 @@ fn actor(config: &Config, seed: u64, fr_prob: f32) -> Actor {
     let mut actor = Actor::new(config, ActorId(0), seed).unwrap();
     reload(&mut actor, fr_schedule(fr_prob), 1);
     actor
-}
-
-fn decode(chunk: &Chunk) -> Vec<StepRecord> {
-    let layout = chunk.header.check(chunk.records.len()).unwrap();
-    let views = layout
-        .view_chunk(&chunk.records, chunk.header.n_steps as usize)
-        .unwrap();
-    views.iter().map(|v| v.to_record()).collect()
-}
-
-/// The chunks of the next episode.
-fn episode(actor: &mut Actor, oracle: &mut dyn GraphOracle) -> Vec<Chunk> {
-    let mut chunks = Vec::new();
-    loop {
-        let chunk = actor.next_chunk(oracle).unwrap();
-        let ended = chunk.header.flags.contains(F::EPISODE_END);
-        chunks.push(chunk);
-        if ended {
-            return chunks;
-        }
-    }
 }
 
 fn decisions(chunks: &[Chunk]) -> Vec<StepRecord> {
