@@ -12,6 +12,7 @@ mod launcher;
 mod maze_graph_png;
 mod plot;
 mod proc;
+mod progress;
 mod run;
 mod serial;
 mod tasks_cmd;

@@ -8,7 +8,7 @@
 //! as the evaluator process). One metrics line is written after each round of actor chunks in
 //! which episodes completed (and a last one at the end if anything changed since).
 //!
-//! Progress goes to the terminal ([`progress`]: episodes against the budget, rates, time left,
+//! Progress goes to the terminal ([`crate::progress`]: episodes against the budget, rates, time left,
 //! coverage, the latest evaluation), or to the log once a minute when stderr is not one.
 //!
 //! Checkpoints and resume (issue #7). A checkpoint has three parts: the learner's
@@ -56,13 +56,16 @@ use crate::proc::actor::{actor_metrics, ReachMeans};
 use crate::proc::common::{task_info, CoverageTracker, GraphRoutes};
 use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
 use crate::proc::graph_service::open_service;
+use crate::progress::{Figures, Progress};
 use crate::run::RunContext;
 use crate::weights_file::WeightsSaver;
 
 mod checkpoint;
-mod progress;
 
 use checkpoint::GraphInput;
+
+/// How often the progress line is logged when stderr is not a terminal.
+const PLAIN_PROGRESS_INTERVAL: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// Updates per `train` call while catching up with the replay ratio.
 const UPDATE_BURST: usize = 64;
@@ -93,13 +96,13 @@ pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
     let mut serial = Serial::open(ctx)?;
     let mut checkpoints = crate::run::CheckpointTimer::new(&serial.ctx.config);
     install_stop_handlers();
-    let mut progress = progress::Progress::new();
+    let mut progress = Progress::new(PLAIN_PROGRESS_INTERVAL);
     let mut waiting_logged = false;
     let mut stopped = false;
     while !budget_reached(&serial.ctx.config, &serial.learner) {
         serial.round()?;
         if serial.line_if_episodes_ended()? {
-            progress.show(&serial.figures());
+            progress.show(&serial.figures(), &[]);
         }
         // Checkpoints and stops wait for a round boundary with no open episode, so that no
         // environment state needs saving; they read state only, so the run's metrics do not
@@ -136,7 +139,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
         }
         serial.picture.tick(episodes, &serial.graph.service);
     }
-    progress.finish(&serial.figures());
+    progress.finish(&serial.figures(), &[]);
     serial.finish(stopped)?;
     Ok(stopped)
 }
@@ -289,13 +292,13 @@ impl Serial {
     }
 
     /// What the progress line shows.
-    fn figures(&self) -> progress::Figures {
+    fn figures(&self) -> Figures {
         let config = &self.ctx.config;
         let value = |values: &[(String, f64)], key: &str| {
             values.iter().find(|(k, _)| k == key).map(|&(_, v)| v)
         };
         let eval = &self.eval.latest;
-        progress::Figures {
+        Figures {
             episodes: self.learner.ingest_stats().episodes_completed,
             max_episodes: config.run.max_episodes,
             env_steps: self.learner.progress().env_steps_ingested,

@@ -5,12 +5,12 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal, Seek, SeekFrom, Write};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::time::{Duration, Instant};
 
-use indicatif::{ProgressBar, ProgressStyle};
 use protocol::{Config, MetricsSample, ProcessRole};
 
+use crate::progress::{Figures, Progress};
 use crate::run::RunContext;
 use crate::tensorboard::EventWriter;
 
@@ -37,8 +37,9 @@ pub struct MetricsBook {
     jsonl: BufWriter<File>,
     csv: BufWriter<File>,
     tensorboard: EventWriter,
-    bar: ProgressBar,
-    last_plain: Instant,
+    progress: Progress,
+    /// The run's budget: `run.max_episodes` and `run.max_env_steps`.
+    budget: (u64, Option<u64>),
     rate: RateMeter,
     run_dir: std::path::PathBuf,
     last_plot: Instant,
@@ -70,24 +71,14 @@ impl MetricsBook {
             )?;
         }
         let tensorboard = EventWriter::create(&ctx.run_dir.join("tensorboard"))?;
-        let bar = if std::io::stderr().is_terminal() {
-            ProgressBar::new_spinner()
-        } else {
-            ProgressBar::hidden()
-        };
-        bar.set_style(
-            ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-        );
-        bar.enable_steady_tick(Duration::from_millis(200));
         Ok(Self {
             values: BTreeMap::new(),
             started: Instant::now(),
             jsonl,
             csv,
             tensorboard,
-            bar,
-            last_plain: Instant::now(),
+            progress: Progress::new(PLAIN_PROGRESS_INTERVAL),
+            budget: (ctx.config.run.max_episodes, ctx.config.run.max_env_steps),
             rate: RateMeter::default(),
             run_dir: ctx.run_dir.clone(),
             last_plot: Instant::now(),
@@ -143,6 +134,7 @@ impl MetricsBook {
             );
         }
         self.rate = RateMeter::default();
+        self.progress.reset_rates();
         Ok(moved)
     }
 
@@ -170,26 +162,34 @@ impl MetricsBook {
             || episodes >= config.run.max_episodes
     }
 
-    pub fn show_progress(&mut self, restarts: u64) {
-        let line = format!(
-            "env steps {} | {:.0} steps/s | episodes {} | eval success {} | policy v{} | restarts {restarts}",
-            self.get("learner/ingest/env_steps") as u64,
-            self.rate.per_sec(),
-            self.get("learner/ingest/episodes_completed") as u64,
-            match self.values.get("evaluator0/eval/success_rate") {
-                Some(rate) => format!("{:.0}%", rate * 100.0),
-                None => "-".to_owned(),
-            },
-            self.get("learner/charts/policy_version") as u64,
-        );
-        if self.bar.is_hidden() {
-            if self.last_plain.elapsed() >= PLAIN_PROGRESS_INTERVAL {
-                tracing::info!("{line}");
-                self.last_plain = Instant::now();
-            }
-        } else {
-            self.bar.set_message(line);
+    /// Where the run stands, as the progress line shows it.
+    fn figures(&self) -> Figures {
+        let (max_episodes, max_env_steps) = self.budget;
+        let success = self.values.get("evaluator0/eval/success_rate");
+        Figures {
+            episodes: self.episodes_completed(),
+            max_episodes,
+            env_steps: self.get("learner/ingest/env_steps") as u64,
+            max_env_steps,
+            coverage: self.values.get("learner/charts/coverage").copied(),
+            eval: success.map(|&s| (s, self.get("evaluator0/eval/train_episodes") as u64)),
         }
+    }
+
+    /// What the process mode's line adds to the common one.
+    fn tail(&self, restarts: u64) -> [String; 2] {
+        [
+            format!(
+                "policy v{}",
+                self.get("learner/charts/policy_version") as u64
+            ),
+            format!("restarts {restarts}"),
+        ]
+    }
+
+    pub fn show_progress(&mut self, restarts: u64) {
+        let (figures, tail) = (self.figures(), self.tail(restarts));
+        self.progress.show(&figures, &tail);
     }
 
     /// Appends one line to each metrics file.
@@ -250,9 +250,10 @@ impl MetricsBook {
         crate::plot::redraw_run_curves(&self.run_dir);
     }
 
-    pub fn finish(&mut self) {
+    pub fn finish(&mut self, restarts: u64) {
         self.plot();
-        self.bar.finish_and_clear();
+        let (figures, tail) = (self.figures(), self.tail(restarts));
+        self.progress.finish(&figures, &tail);
     }
 }
 

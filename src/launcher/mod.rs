@@ -118,7 +118,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
     let drained = metrics_in.drain().unwrap_or_default();
     book.record(&drained);
     book.flush(children.total_restarts())?;
-    book.finish();
+    book.finish(children.total_restarts());
     clean_stale_resources(&node);
     let ending = ending?;
     match ending {

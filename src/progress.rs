@@ -1,7 +1,7 @@
-//! The serial run's progress line: where the run stands against its budget, how fast it goes
-//! and when it should end. On a terminal it is one line redrawn after every episode; otherwise
-//! (a log file, `nohup`) an info line every [`PLAIN_INTERVAL`]. It reads the clock for display
-//! only: nothing the run computes depends on it.
+//! The progress line of `asi train` (serial and process mode): where the run stands against
+//! its budget, how fast it goes and when it should end. On a terminal it is one line redrawn in
+//! place; otherwise (a log file, `nohup`) an info line at most once per interval. It reads the
+//! clock for display only: nothing a run computes depends on it.
 
 use std::collections::VecDeque;
 use std::io::IsTerminal;
@@ -9,8 +9,6 @@ use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
 
-/// How often a progress line is logged when stderr is not a terminal.
-const PLAIN_INTERVAL: Duration = Duration::from_secs(60);
 /// The rates are taken over this much of the recent past: the first episodes of a run (no
 /// updates before the replay holds enough) are much faster than the rest.
 const RATE_SPAN: Duration = Duration::from_secs(300);
@@ -36,7 +34,16 @@ struct Rates {
 }
 
 impl Rates {
+    /// Records where the run stands at `now` (nothing when it has not moved since the last
+    /// sample, so that frequent calls keep the window short).
     fn observe(&mut self, now: Instant, episodes: u64, env_steps: u64) {
+        if self
+            .samples
+            .back()
+            .is_some_and(|&(_, e, s)| (e, s) == (episodes, env_steps))
+        {
+            return;
+        }
         self.samples.push_back((now, episodes, env_steps));
         // Keep one sample older than the span, so that the rate always covers the whole span.
         while self.samples.len() > 2 && now.duration_since(self.samples[1].0) >= RATE_SPAN {
@@ -83,7 +90,7 @@ fn human(d: Duration) -> String {
 }
 
 /// The text of the progress line.
-fn line(figures: &Figures, rates: Option<(f64, f64)>) -> String {
+fn line(figures: &Figures, rates: Option<(f64, f64)>, tail: &[String]) -> String {
     let mut parts = vec![format!(
         "episode {}/{}",
         figures.episodes, figures.max_episodes
@@ -109,6 +116,7 @@ fn line(figures: &Figures, rates: Option<(f64, f64)>) -> String {
         Some((success, at)) => format!("eval success {:.0}% at episode {at}", success * 100.0),
         None => "eval success -".to_owned(),
     });
+    parts.extend(tail.iter().cloned());
     parts.join(" | ")
 }
 
@@ -116,11 +124,13 @@ fn line(figures: &Figures, rates: Option<(f64, f64)>) -> String {
 pub struct Progress {
     bar: ProgressBar,
     rates: Rates,
+    /// How often a line is logged when stderr is not a terminal.
+    plain_interval: Duration,
     last_plain: Option<Instant>,
 }
 
 impl Progress {
-    pub fn new() -> Self {
+    pub fn new(plain_interval: Duration) -> Self {
         let bar = if std::io::stderr().is_terminal() {
             let bar = ProgressBar::new_spinner();
             bar.set_style(
@@ -135,32 +145,38 @@ impl Progress {
         Self {
             bar,
             rates: Rates::default(),
+            plain_interval,
             last_plain: None,
         }
     }
 
-    /// Shows where the run stands (call it when episodes ended).
-    pub fn show(&mut self, figures: &Figures) {
+    /// Shows where the run stands, with `tail` (more ` | `-separated parts) at the end.
+    pub fn show(&mut self, figures: &Figures, tail: &[String]) {
         let now = Instant::now();
         self.rates.observe(now, figures.episodes, figures.env_steps);
-        let text = line(figures, self.rates.per_sec());
+        let text = line(figures, self.rates.per_sec(), tail);
         if !self.bar.is_hidden() {
             self.bar.set_message(text);
         } else if self
             .last_plain
-            .is_none_or(|t| now.duration_since(t) >= PLAIN_INTERVAL)
+            .is_none_or(|t| now.duration_since(t) >= self.plain_interval)
         {
             tracing::info!("{text}");
             self.last_plain = Some(now);
         }
     }
 
+    /// Forgets the rates (the run went back to a checkpoint).
+    pub fn reset_rates(&mut self) {
+        self.rates = Rates::default();
+    }
+
     /// Removes the line from the terminal and logs where the run ended.
-    pub fn finish(&mut self, figures: &Figures) {
+    pub fn finish(&mut self, figures: &Figures, tail: &[String]) {
         self.bar.finish_and_clear();
         self.rates
             .observe(Instant::now(), figures.episodes, figures.env_steps);
-        tracing::info!("{}", line(figures, self.rates.per_sec()));
+        tracing::info!("{}", line(figures, self.rates.per_sec(), tail));
     }
 }
 
@@ -186,6 +202,12 @@ mod tests {
         assert_eq!(rates.per_sec(), None);
         rates.observe(t0, 0, 0);
         assert_eq!(rates.per_sec(), None, "one sample has no rate");
+        rates.observe(t0 + Duration::from_secs(30), 0, 0);
+        assert_eq!(
+            rates.samples.len(),
+            1,
+            "a run that has not moved adds no sample"
+        );
         // A fast start (100 episodes in the first minute), then 10 episodes a minute.
         rates.observe(t0 + Duration::from_secs(60), 100, 50_000);
         for minute in 2..=11 {
@@ -237,7 +259,7 @@ mod tests {
     fn the_line_names_budget_rates_eta_coverage_and_evaluation() {
         let f = figures();
         assert_eq!(
-            line(&f, Some((10.0 / 60.0, 83.3))),
+            line(&f, Some((10.0 / 60.0, 83.3)), &[]),
             "episode 500/2000 | env steps 250000 | 10.0 episodes/min, 83 steps/s \
              | about 2 h 30 min left | coverage 0.412 | eval success 30% at episode 450"
         );
@@ -248,8 +270,8 @@ mod tests {
             ..figures()
         };
         assert_eq!(
-            line(&f, None),
-            "episode 500/2000 | env steps 250000/1000000 | eval success -"
+            line(&f, None, &["restarts 2".to_owned()]),
+            "episode 500/2000 | env steps 250000/1000000 | eval success - | restarts 2"
         );
         // At the end: no time left to show.
         let f = Figures {
@@ -257,7 +279,7 @@ mod tests {
             ..f
         };
         assert_eq!(
-            line(&f, Some((0.2, 100.0))),
+            line(&f, Some((0.2, 100.0)), &[]),
             "episode 2000/2000 | env steps 250000/1000000 | 12.0 episodes/min, 100 steps/s \
              | eval success -"
         );
