@@ -85,17 +85,15 @@ pub struct ChannelShape {
 
 /// Creates a node whose name identifies the run and role (shown by iceoryx2 tooling).
 pub fn open_node(node_name: &str) -> Result<Node<Ipc>, TransportError> {
-    let name = NodeName::new(node_name).map_err(|e| TransportError::Node {
+    let failed = |e: &dyn Debug| TransportError::Node {
         name: node_name.to_owned(),
         reason: format!("{e:?}"),
-    })?;
+    };
+    let name = NodeName::new(node_name).map_err(|e| failed(&e))?;
     NodeBuilder::new()
         .name(&name)
         .create::<Ipc>()
-        .map_err(|e| TransportError::Node {
-            name: node_name.to_owned(),
-            reason: format!("{e:?}"),
-        })
+        .map_err(|e| failed(&e))
 }
 
 fn service_name(name: &str) -> Result<ServiceName, TransportError> {
@@ -105,42 +103,171 @@ fn service_name(name: &str) -> Result<ServiceName, TransportError> {
     })
 }
 
-type SliceService<T, H> =
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, [T], H>;
+// `map_err` adapters: each turns an iceoryx2 error into the [`TransportError`] of its step,
+// naming the service (and the port).
+
+fn open_failed<E: Debug>(service: &str) -> impl Fn(E) -> TransportError + '_ {
+    move |e| TransportError::Open {
+        service: service.to_owned(),
+        reason: format!("{e:?}"),
+    }
+}
+
+fn port_failed<'a, E: Debug>(
+    service: &'a str,
+    port: &'static str,
+) -> impl Fn(E) -> TransportError + 'a {
+    move |e| TransportError::Port {
+        service: service.to_owned(),
+        port,
+        reason: format!("{e:?}"),
+    }
+}
+
+fn send_failed<E: Debug>(service: &str) -> impl Fn(E) -> TransportError + '_ {
+    move |e| TransportError::Send {
+        service: service.to_owned(),
+        reason: format!("{e:?}"),
+    }
+}
+
+fn receive_failed<E: Debug>(service: &str) -> impl Fn(E) -> TransportError + '_ {
+    move |e| TransportError::Receive {
+        service: service.to_owned(),
+        reason: format!("{e:?}"),
+    }
+}
+
+type PubSubService<P, H> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, P, H>;
 type EventService = iceoryx2::service::port_factory::event::PortFactory<Ipc>;
 
-fn open_services<T, H>(
+/// Opens (or creates) the wake-up event service `name`, with room for `notifiers` + 1
+/// notifiers and `listeners` + 1 listeners (one spare of each).
+fn open_events(
     node: &Node<Ipc>,
     name: &str,
-    shape: &ChannelShape,
-) -> Result<(SliceService<T, H>, EventService), TransportError>
+    notifiers: usize,
+    listeners: usize,
+) -> Result<EventService, TransportError> {
+    node.service_builder(&service_name(name)?)
+        .event()
+        .max_notifiers(notifiers + 1)
+        .max_listeners(listeners + 1)
+        .open_or_create()
+        .map_err(open_failed(name))
+}
+
+type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Ipc>;
+
+/// Gives a channel's publish–subscribe service the sizes of `shape`.
+fn sized<P, H>(builder: PubSubBuilder<P, H>, shape: &ChannelShape) -> PubSubBuilder<P, H>
 where
-    T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + Default + ZeroCopySend + 'static,
+    P: Debug + IceoryxSend + ?Sized,
+    H: Debug + ZeroCopySend,
 {
-    let sn = service_name(name)?;
-    let open_err = |e: &dyn Debug| TransportError::Open {
-        service: name.to_owned(),
-        reason: format!("{e:?}"),
-    };
-    let data = node
-        .service_builder(&sn)
-        .publish_subscribe::<[T]>()
-        .user_header::<H>()
+    builder
         .history_size(shape.history)
         .subscriber_max_buffer_size(shape.subscriber_buffer.max(shape.history))
         .max_publishers(shape.max_publishers)
         .max_subscribers(shape.max_subscribers)
+}
+
+/// Opens a slice channel's publish–subscribe service and its event. (iceoryx2 opens slice and
+/// fixed-size payloads with different methods, hence two openers.)
+fn open_slice_services<T, H>(
+    node: &Node<Ipc>,
+    name: &str,
+    shape: &ChannelShape,
+) -> Result<(PubSubService<[T], H>, EventService), TransportError>
+where
+    T: Debug + Copy + ZeroCopySend + 'static,
+    H: Debug + Default + ZeroCopySend + 'static,
+{
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .publish_subscribe::<[T]>()
+        .user_header::<H>();
+    let data = sized(builder, shape)
         .open_or_create()
-        .map_err(|e| open_err(&e))?;
-    let events = node
-        .service_builder(&sn)
-        .event()
-        .max_notifiers(shape.max_publishers + 1)
-        .max_listeners(shape.max_subscribers + 1)
-        .open_or_create()
-        .map_err(|e| open_err(&e))?;
+        .map_err(open_failed(name))?;
+    let events = open_events(node, name, shape.max_publishers, shape.max_subscribers)?;
     Ok((data, events))
+}
+
+/// Opens a fixed-size value channel's publish–subscribe service and its event.
+fn open_value_services<T>(
+    node: &Node<Ipc>,
+    name: &str,
+    shape: &ChannelShape,
+) -> Result<(PubSubService<T, ()>, EventService), TransportError>
+where
+    T: Debug + Copy + ZeroCopySend + 'static,
+{
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .publish_subscribe::<T>();
+    let data = sized(builder, shape)
+        .open_or_create()
+        .map_err(open_failed(name))?;
+    let events = open_events(node, name, shape.max_publishers, shape.max_subscribers)?;
+    Ok((data, events))
+}
+
+/// A channel's receiving ports: the subscriber and the listener of its wake-ups.
+type SubscriberPorts<P, H> = (Subscriber<Ipc, P, H>, Listener<Ipc>);
+
+/// Creates the subscriber and listener ports of an opened channel.
+fn subscriber_ports<P, H>(
+    name: &str,
+    shape: &ChannelShape,
+    data: &PubSubService<P, H>,
+    events: &EventService,
+) -> Result<SubscriberPorts<P, H>, TransportError>
+where
+    P: Debug + IceoryxSend + ?Sized + 'static,
+    H: Debug + Default + ZeroCopySend + 'static,
+{
+    let subscriber = data
+        .subscriber_builder()
+        .buffer_size(shape.subscriber_buffer.max(shape.history))
+        .create()
+        .map_err(port_failed(name, "subscriber"))?;
+    let listener = events
+        .listener_builder()
+        .create()
+        .map_err(port_failed(name, "listener"))?;
+    Ok((subscriber, listener))
+}
+
+/// Connects subscribers that appeared since the last send, hands them the history and wakes
+/// them.
+fn update_publisher<P, H>(
+    name: &str,
+    publisher: &Publisher<Ipc, P, H>,
+    notifier: &Notifier<Ipc>,
+) -> Result<(), TransportError>
+where
+    P: Debug + IceoryxSend + ?Sized + 'static,
+    H: Debug + ZeroCopySend + 'static,
+{
+    publisher.update_connections().map_err(send_failed(name))?;
+    notifier.notify().map_err(send_failed(name))?;
+    Ok(())
+}
+
+/// Clears the pending wake-ups of `listener`, after waiting up to `timeout` for one if given.
+fn take_wakeups(
+    name: &str,
+    listener: &Listener<Ipc>,
+    timeout: Option<Duration>,
+) -> Result<(), TransportError> {
+    match timeout {
+        Some(timeout) => listener.timed_wait(|_| {}, timeout),
+        None => listener.try_wait(|_| {}),
+    }
+    .map(|_| ())
+    .map_err(receive_failed(name))
 }
 
 /// Sending end of a channel: loans shared memory, writes header and slice, sends, notifies.
@@ -166,12 +293,7 @@ where
         shape: &ChannelShape,
         backpressure: Backpressure,
     ) -> Result<Self, TransportError> {
-        let (data, events) = open_services::<T, H>(node, name, shape)?;
-        let port_err = |port, e: &dyn Debug| TransportError::Port {
-            service: name.to_owned(),
-            port,
-            reason: format!("{e:?}"),
-        };
+        let (data, events) = open_slice_services::<T, H>(node, name, shape)?;
         let strategy = match backpressure {
             Backpressure::Discard => BackpressureStrategy::DiscardData,
             Backpressure::Retry => BackpressureStrategy::RetryUntilDelivered,
@@ -181,11 +303,11 @@ where
             .initial_max_slice_len(shape.max_slice_len)
             .backpressure_strategy(strategy)
             .create()
-            .map_err(|e| port_err("publisher", &e))?;
+            .map_err(port_failed(name, "publisher"))?;
         let notifier = events
             .notifier_builder()
             .create()
-            .map_err(|e| port_err("notifier", &e))?;
+            .map_err(port_failed(name, "notifier"))?;
         Ok(Self {
             name: name.to_owned(),
             max_slice_len: shape.max_slice_len,
@@ -203,35 +325,23 @@ where
                 max: self.max_slice_len,
             });
         }
-        let send_err = |e: &dyn Debug| TransportError::Send {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
         let mut sample = self
             .publisher
             .loan_slice_uninit(payload.len())
-            .map_err(|e| send_err(&e))?;
+            .map_err(send_failed(&self.name))?;
         *sample.user_header_mut() = header;
         let delivered = sample
             .write_from_slice(payload)
             .send()
-            .map_err(|e| send_err(&e))?;
-        self.notifier.notify().map_err(|e| send_err(&e))?;
+            .map_err(send_failed(&self.name))?;
+        self.notifier.notify().map_err(send_failed(&self.name))?;
         Ok(delivered)
     }
 
     /// Connects subscribers that appeared since the last send and hands them the history
     /// (e.g. the latest weights to a restarted actor). Call it on a timer.
     pub fn update_connections(&self) -> Result<(), TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        self.publisher
-            .update_connections()
-            .map_err(|e| send_err(&e))?;
-        self.notifier.notify().map_err(|e| send_err(&e))?;
-        Ok(())
+        update_publisher(&self.name, &self.publisher, &self.notifier)
     }
 }
 
@@ -256,21 +366,8 @@ where
         name: &str,
         shape: &ChannelShape,
     ) -> Result<Self, TransportError> {
-        let (data, events) = open_services::<T, H>(node, name, shape)?;
-        let port_err = |port, e: &dyn Debug| TransportError::Port {
-            service: name.to_owned(),
-            port,
-            reason: format!("{e:?}"),
-        };
-        let subscriber = data
-            .subscriber_builder()
-            .buffer_size(shape.subscriber_buffer.max(shape.history))
-            .create()
-            .map_err(|e| port_err("subscriber", &e))?;
-        let listener = events
-            .listener_builder()
-            .create()
-            .map_err(|e| port_err("listener", &e))?;
+        let (data, events) = open_slice_services::<T, H>(node, name, shape)?;
+        let (subscriber, listener) = subscriber_ports(name, shape, &data, &events)?;
         Ok(Self {
             name: name.to_owned(),
             subscriber,
@@ -286,13 +383,13 @@ where
     /// Clears pending wake-ups, then hands every available sample to `on_sample` in arrival
     /// order. Returns how many samples were handled.
     pub fn drain(&self, mut on_sample: impl FnMut(&H, &[T])) -> Result<usize, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        self.listener.try_wait(|_| {}).map_err(|e| recv_err(&e))?;
+        take_wakeups(&self.name, &self.listener, None)?;
         let mut n = 0;
-        while let Some(sample) = self.subscriber.receive().map_err(|e| recv_err(&e))? {
+        while let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(receive_failed(&self.name))?
+        {
             on_sample(sample.user_header(), sample.payload());
             n += 1;
         }
@@ -305,13 +402,7 @@ where
         timeout: Duration,
         on_sample: impl FnMut(&H, &[T]),
     ) -> Result<usize, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| recv_err(&e))?;
+        take_wakeups(&self.name, &self.listener, Some(timeout))?;
         self.drain(on_sample)
     }
 }
@@ -323,41 +414,6 @@ pub struct ValuePublisher<T: Debug + Copy + ZeroCopySend + 'static> {
     notifier: Notifier<Ipc>,
 }
 
-fn open_value_services<T: Debug + Copy + ZeroCopySend + 'static>(
-    node: &Node<Ipc>,
-    name: &str,
-    shape: &ChannelShape,
-) -> Result<
-    (
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, T, ()>,
-        EventService,
-    ),
-    TransportError,
-> {
-    let sn = service_name(name)?;
-    let open_err = |e: &dyn Debug| TransportError::Open {
-        service: name.to_owned(),
-        reason: format!("{e:?}"),
-    };
-    let data = node
-        .service_builder(&sn)
-        .publish_subscribe::<T>()
-        .history_size(shape.history)
-        .subscriber_max_buffer_size(shape.subscriber_buffer.max(shape.history))
-        .max_publishers(shape.max_publishers)
-        .max_subscribers(shape.max_subscribers)
-        .open_or_create()
-        .map_err(|e| open_err(&e))?;
-    let events = node
-        .service_builder(&sn)
-        .event()
-        .max_notifiers(shape.max_publishers + 1)
-        .max_listeners(shape.max_subscribers + 1)
-        .open_or_create()
-        .map_err(|e| open_err(&e))?;
-    Ok((data, events))
-}
-
 impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
     pub fn open(
         node: &Node<Ipc>,
@@ -365,20 +421,15 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
         shape: &ChannelShape,
     ) -> Result<Self, TransportError> {
         let (data, events) = open_value_services::<T>(node, name, shape)?;
-        let port_err = |port, e: &dyn Debug| TransportError::Port {
-            service: name.to_owned(),
-            port,
-            reason: format!("{e:?}"),
-        };
         let publisher = data
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
-            .map_err(|e| port_err("publisher", &e))?;
+            .map_err(port_failed(name, "publisher"))?;
         let notifier = events
             .notifier_builder()
             .create()
-            .map_err(|e| port_err("notifier", &e))?;
+            .map_err(port_failed(name, "notifier"))?;
         Ok(Self {
             name: name.to_owned(),
             publisher,
@@ -388,26 +439,17 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
 
     /// Sends a copy of `value` and wakes the subscribers; a full subscriber misses it.
     pub fn send(&self, value: T) -> Result<usize, TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        let delivered = self.publisher.send_copy(value).map_err(|e| send_err(&e))?;
-        self.notifier.notify().map_err(|e| send_err(&e))?;
+        let delivered = self
+            .publisher
+            .send_copy(value)
+            .map_err(send_failed(&self.name))?;
+        self.notifier.notify().map_err(send_failed(&self.name))?;
         Ok(delivered)
     }
 
     /// Connects new subscribers and hands them the history; call it on a timer.
     pub fn update_connections(&self) -> Result<(), TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        self.publisher
-            .update_connections()
-            .map_err(|e| send_err(&e))?;
-        self.notifier.notify().map_err(|e| send_err(&e))?;
-        Ok(())
+        update_publisher(&self.name, &self.publisher, &self.notifier)
     }
 }
 
@@ -425,20 +467,7 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
         shape: &ChannelShape,
     ) -> Result<Self, TransportError> {
         let (data, events) = open_value_services::<T>(node, name, shape)?;
-        let port_err = |port, e: &dyn Debug| TransportError::Port {
-            service: name.to_owned(),
-            port,
-            reason: format!("{e:?}"),
-        };
-        let subscriber = data
-            .subscriber_builder()
-            .buffer_size(shape.subscriber_buffer.max(shape.history))
-            .create()
-            .map_err(|e| port_err("subscriber", &e))?;
-        let listener = events
-            .listener_builder()
-            .create()
-            .map_err(|e| port_err("listener", &e))?;
+        let (subscriber, listener) = subscriber_ports(name, shape, &data, &events)?;
         Ok(Self {
             name: name.to_owned(),
             subscriber,
@@ -453,13 +482,13 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
 
     /// Clears pending wake-ups and returns every available message in arrival order.
     pub fn drain(&self) -> Result<Vec<T>, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        self.listener.try_wait(|_| {}).map_err(|e| recv_err(&e))?;
+        take_wakeups(&self.name, &self.listener, None)?;
         let mut values = Vec::new();
-        while let Some(sample) = self.subscriber.receive().map_err(|e| recv_err(&e))? {
+        while let Some(sample) = self
+            .subscriber
+            .receive()
+            .map_err(receive_failed(&self.name))?
+        {
             values.push(*sample.payload());
         }
         Ok(values)
@@ -467,13 +496,7 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
 
     /// Blocks up to `timeout` for a wake-up, then drains.
     pub fn wait_and_drain(&self, timeout: Duration) -> Result<Vec<T>, TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| recv_err(&e))?;
+        take_wakeups(&self.name, &self.listener, Some(timeout))?;
         self.drain()
     }
 }
@@ -491,10 +514,6 @@ where
     Q: Debug + Default + Copy + ZeroCopySend + 'static,
     R: Debug + Default + Copy + ZeroCopySend + 'static,
 {
-    let open_err = |e: &dyn Debug| TransportError::Open {
-        service: name.to_owned(),
-        reason: format!("{e:?}"),
-    };
     let rpc = node
         .service_builder(&service_name(name)?)
         .request_response::<[u8], [u8]>()
@@ -503,15 +522,9 @@ where
         .max_clients(max_clients)
         .max_servers(1)
         .open_or_create()
-        .map_err(|e| open_err(&e))?;
-    let event = |suffix: &str| {
-        node.service_builder(&service_name(&format!("{name}/{suffix}"))?)
-            .event()
-            .max_notifiers(max_clients + 1)
-            .max_listeners(max_clients + 1)
-            .open_or_create()
-            .map_err(|e| open_err(&e))
-    };
+        .map_err(open_failed(name))?;
+    let event =
+        |suffix: &str| open_events(node, &format!("{name}/{suffix}"), max_clients, max_clients);
     Ok((rpc, event("requests")?, event("responses")?))
 }
 
@@ -539,25 +552,20 @@ where
         max_len: usize,
     ) -> Result<Self, TransportError> {
         let (rpc, requests, responses) = open_rpc_services::<Q, R>(node, name, max_clients)?;
-        let port_err = |port, e: &dyn Debug| TransportError::Port {
-            service: name.to_owned(),
-            port,
-            reason: format!("{e:?}"),
-        };
         let server = rpc
             .server_builder()
             .initial_max_slice_len(max_len)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(|e| port_err("server", &e))?;
+            .map_err(port_failed(name, "server"))?;
         let listener = requests
             .listener_builder()
             .create()
-            .map_err(|e| port_err("listener", &e))?;
+            .map_err(port_failed(name, "listener"))?;
         let notifier = responses
             .notifier_builder()
             .create()
-            .map_err(|e| port_err("notifier", &e))?;
+            .map_err(port_failed(name, "notifier"))?;
         Ok(Self {
             name: name.to_owned(),
             server,
@@ -577,24 +585,22 @@ where
         &self,
         mut handler: impl FnMut(&Q, &[u8]) -> (R, Vec<u8>),
     ) -> Result<usize, TransportError> {
-        let err = |e: &dyn Debug| TransportError::Receive {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
-        self.listener.try_wait(|_| {}).map_err(|e| err(&e))?;
+        take_wakeups(&self.name, &self.listener, None)?;
         let mut n = 0;
-        while let Some(request) = self.server.receive().map_err(|e| err(&e))? {
+        while let Some(request) = self.server.receive().map_err(receive_failed(&self.name))? {
             let (header, body) = handler(request.user_header(), request.payload());
-            let mut response = request.loan_slice_uninit(body.len()).map_err(|e| err(&e))?;
+            let mut response = request
+                .loan_slice_uninit(body.len())
+                .map_err(receive_failed(&self.name))?;
             *response.user_header_mut() = header;
             response
                 .write_from_slice(&body)
                 .send()
-                .map_err(|e| err(&e))?;
+                .map_err(receive_failed(&self.name))?;
             n += 1;
         }
         if n > 0 {
-            self.notifier.notify().map_err(|e| err(&e))?;
+            self.notifier.notify().map_err(receive_failed(&self.name))?;
         }
         Ok(n)
     }
@@ -630,25 +636,20 @@ where
         max_len: usize,
     ) -> Result<Self, TransportError> {
         let (rpc, requests, responses) = open_rpc_services::<Q, R>(node, name, max_clients)?;
-        let port_err = |port, e: &dyn Debug| TransportError::Port {
-            service: name.to_owned(),
-            port,
-            reason: format!("{e:?}"),
-        };
         let client = rpc
             .client_builder()
             .initial_max_slice_len(max_len)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(|e| port_err("client", &e))?;
+            .map_err(port_failed(name, "client"))?;
         let notifier = requests
             .notifier_builder()
             .create()
-            .map_err(|e| port_err("notifier", &e))?;
+            .map_err(port_failed(name, "notifier"))?;
         let listener = responses
             .listener_builder()
             .create()
-            .map_err(|e| port_err("listener", &e))?;
+            .map_err(port_failed(name, "listener"))?;
         Ok(Self {
             name: name.to_owned(),
             client,
@@ -671,19 +672,15 @@ where
         body: &[u8],
         timeout: Duration,
     ) -> Result<(R, Vec<u8>), TransportError> {
-        let recv_err = |e: &dyn Debug| TransportError::Receive {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
         let deadline = std::time::Instant::now() + timeout;
         let mut pending = self.send_request(header, body)?;
         loop {
-            if let Some(response) = pending.receive().map_err(|e| recv_err(&e))? {
+            if let Some(response) = pending.receive().map_err(receive_failed(&self.name))? {
                 return Ok((*response.user_header(), response.payload().to_vec()));
             }
             if !pending.is_connected() {
                 // A response sent just before its server let go of the request is kept.
-                if let Some(response) = pending.receive().map_err(|e| recv_err(&e))? {
+                if let Some(response) = pending.receive().map_err(receive_failed(&self.name))? {
                     return Ok((*response.user_header(), response.payload().to_vec()));
                 }
                 // Dropped first: it counts against the client's active requests.
@@ -692,30 +689,28 @@ where
             }
             let left = deadline.saturating_duration_since(std::time::Instant::now());
             if left.is_zero() {
-                return Err(recv_err(&format!("no response within {timeout:?}")));
+                return Err(receive_failed(&self.name)(format!(
+                    "no response within {timeout:?}"
+                )));
             }
             self.listener
                 .timed_wait(|_| {}, left.min(SERVER_CHECK_INTERVAL))
-                .map_err(|e| recv_err(&e))?;
+                .map_err(receive_failed(&self.name))?;
         }
     }
 
     /// Loans, writes, sends and notifies one request.
     fn send_request(&self, header: Q, body: &[u8]) -> Result<Pending<Q, R>, TransportError> {
-        let send_err = |e: &dyn Debug| TransportError::Send {
-            service: self.name.clone(),
-            reason: format!("{e:?}"),
-        };
         let mut request = self
             .client
             .loan_slice_uninit(body.len())
-            .map_err(|e| send_err(&e))?;
+            .map_err(send_failed(&self.name))?;
         *request.user_header_mut() = header;
         let pending = request
             .write_from_slice(body)
             .send()
-            .map_err(|e| send_err(&e))?;
-        self.notifier.notify().map_err(|e| send_err(&e))?;
+            .map_err(send_failed(&self.name))?;
+        self.notifier.notify().map_err(send_failed(&self.name))?;
         Ok(pending)
     }
 }
