@@ -222,3 +222,58 @@ fn a_call_whose_server_went_away_is_answered_by_the_next_server() {
     assert_eq!(body, vec![9]);
     assert!(served >= 1);
 }
+
+#[test]
+fn opening_a_channel_with_another_payload_type_or_size_names_the_service() {
+    let service = unique("mismatch");
+    let node = open_node("test-mismatch").unwrap();
+    let _creator = SliceSubscriber::<f32, TestHeader>::open(&node, &service, &SHAPE).unwrap();
+    let wrong_type = SliceSubscriber::<u8, TestHeader>::open(&node, &service, &SHAPE);
+    let more_publishers = ChannelShape {
+        max_publishers: SHAPE.max_publishers + 1,
+        ..SHAPE
+    };
+    let too_many = SlicePublisher::<f32, TestHeader>::open(
+        &node,
+        &service,
+        &more_publishers,
+        Backpressure::Discard,
+    );
+    for (what, result) in [
+        ("payload type", wrong_type.err()),
+        ("publishers", too_many.err()),
+    ] {
+        match result {
+            Some(TransportError::Open { service: named, .. }) => {
+                assert_eq!(named, service, "{what}")
+            }
+            other => panic!("{what}: expected an Open error, got {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn a_port_beyond_the_channels_maximum_is_a_port_error() {
+    let service = unique("ports");
+    let node = open_node("test-ports").unwrap();
+    let _kept: Vec<_> = (0..SHAPE.max_subscribers)
+        .map(|_| SliceSubscriber::<f32, TestHeader>::open(&node, &service, &SHAPE).unwrap())
+        .collect();
+    let err = SliceSubscriber::<f32, TestHeader>::open(&node, &service, &SHAPE)
+        .err()
+        .expect("one subscriber more than max_subscribers");
+    assert!(
+        matches!(&err, TransportError::Port { service: named, port: "subscriber", .. } if *named == service),
+        "{err:?}"
+    );
+    assert!(err.to_string().contains("subscriber port"), "{err}");
+}
+
+#[test]
+fn an_invalid_service_name_is_an_error() {
+    let node = open_node("test-bad-name").unwrap();
+    let err = SliceSubscriber::<f32, TestHeader>::open(&node, "", &SHAPE)
+        .err()
+        .expect("an empty service name");
+    assert!(matches!(err, TransportError::ServiceName { .. }), "{err:?}");
+}
