@@ -173,6 +173,22 @@ where
         .max_subscribers(shape.max_subscribers)
 }
 
+/// A notifier port on the event service `events` of channel `name`.
+fn notifier_port(name: &str, events: &EventService) -> Result<Notifier<Ipc>, TransportError> {
+    events
+        .notifier_builder()
+        .create()
+        .map_err(port_failed(name, "notifier"))
+}
+
+/// A listener port on the event service `events` of channel `name`.
+fn listener_port(name: &str, events: &EventService) -> Result<Listener<Ipc>, TransportError> {
+    events
+        .listener_builder()
+        .create()
+        .map_err(port_failed(name, "listener"))
+}
+
 /// Opens a slice channel's publish–subscribe service and its event. (iceoryx2 opens slice and
 /// fixed-size payloads with different methods, hence two openers.)
 fn open_slice_services<T, H>(
@@ -233,10 +249,7 @@ where
         .buffer_size(shape.subscriber_buffer.max(shape.history))
         .create()
         .map_err(port_failed(name, "subscriber"))?;
-    let listener = events
-        .listener_builder()
-        .create()
-        .map_err(port_failed(name, "listener"))?;
+    let listener = listener_port(name, &events)?;
     Ok((subscriber, listener))
 }
 
@@ -304,10 +317,7 @@ where
             .backpressure_strategy(strategy)
             .create()
             .map_err(port_failed(name, "publisher"))?;
-        let notifier = events
-            .notifier_builder()
-            .create()
-            .map_err(port_failed(name, "notifier"))?;
+        let notifier = notifier_port(name, &events)?;
         Ok(Self {
             name: name.to_owned(),
             max_slice_len: shape.max_slice_len,
@@ -426,10 +436,7 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(port_failed(name, "publisher"))?;
-        let notifier = events
-            .notifier_builder()
-            .create()
-            .map_err(port_failed(name, "notifier"))?;
+        let notifier = notifier_port(name, &events)?;
         Ok(Self {
             name: name.to_owned(),
             publisher,
@@ -558,14 +565,8 @@ where
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(port_failed(name, "server"))?;
-        let listener = requests
-            .listener_builder()
-            .create()
-            .map_err(port_failed(name, "listener"))?;
-        let notifier = responses
-            .notifier_builder()
-            .create()
-            .map_err(port_failed(name, "notifier"))?;
+        let listener = listener_port(name, &requests)?;
+        let notifier = notifier_port(name, &responses)?;
         Ok(Self {
             name: name.to_owned(),
             server,
@@ -642,14 +643,8 @@ where
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(port_failed(name, "client"))?;
-        let notifier = requests
-            .notifier_builder()
-            .create()
-            .map_err(port_failed(name, "notifier"))?;
-        let listener = responses
-            .listener_builder()
-            .create()
-            .map_err(port_failed(name, "listener"))?;
+        let notifier = notifier_port(name, &requests)?;
+        let listener = listener_port(name, &responses)?;
         Ok(Self {
             name: name.to_owned(),
             client,
