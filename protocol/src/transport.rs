@@ -249,7 +249,7 @@ where
         .buffer_size(shape.subscriber_buffer.max(shape.history))
         .create()
         .map_err(port_failed(name, "subscriber"))?;
-    let listener = listener_port(name, &events)?;
+    let listener = listener_port(name, events)?;
     Ok((subscriber, listener))
 }
 
