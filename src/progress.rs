@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
 
-/// The rates are taken over this much of the recent past: the first episodes of a run (no
-/// updates before the replay holds enough) are much faster than the rest.
+/// The line's rates are taken over this much of the recent past: the first episodes of a run
+/// (no updates before the replay holds enough) are much faster than the rest.
 const RATE_SPAN: Duration = Duration::from_secs(300);
 
 /// What the line shows, read from the run after an episode ended.
@@ -26,33 +26,46 @@ pub struct Figures {
     pub eval: Option<(f64, u64)>,
 }
 
-/// Episodes and env steps per second over the recent past.
-#[derive(Debug, Default)]
-struct Rates {
+/// Episodes and env steps per second over the last `span` (the progress line's five minutes,
+/// the launcher's `launcher/env_steps_per_sec` ten seconds).
+#[derive(Debug)]
+pub struct Rates {
+    span: Duration,
     /// (when, episodes, env steps), oldest first.
     samples: VecDeque<(Instant, u64, u64)>,
 }
 
 impl Rates {
-    /// Records where the run stands at `now` (nothing when it has not moved since the last
-    /// sample, so that frequent calls keep the window short).
-    fn observe(&mut self, now: Instant, episodes: u64, env_steps: u64) {
-        if self
-            .samples
-            .back()
-            .is_some_and(|&(_, e, s)| (e, s) == (episodes, env_steps))
-        {
-            return;
+    /// No samples yet; rates over `span` once there are.
+    pub fn over(span: Duration) -> Self {
+        Self {
+            span,
+            samples: VecDeque::new(),
         }
-        self.samples.push_back((now, episodes, env_steps));
+    }
+
+    /// Records where the run stands at `now`. A run that has not moved since the last two
+    /// samples only moves the newest one's time on, so frequent calls keep the window short
+    /// and a stalled run's rates fall toward 0 instead of keeping their last value.
+    pub fn observe(&mut self, now: Instant, episodes: u64, env_steps: u64) {
+        let n = self.samples.len();
+        let unmoved = |i: usize| {
+            let (_, e, s) = self.samples[i];
+            (e, s) == (episodes, env_steps)
+        };
+        if n >= 2 && unmoved(n - 1) && unmoved(n - 2) {
+            self.samples[n - 1].0 = now;
+        } else {
+            self.samples.push_back((now, episodes, env_steps));
+        }
         // Keep one sample older than the span, so that the rate always covers the whole span.
-        while self.samples.len() > 2 && now.duration_since(self.samples[1].0) >= RATE_SPAN {
+        while self.samples.len() > 2 && now.duration_since(self.samples[1].0) >= self.span {
             self.samples.pop_front();
         }
     }
 
     /// (episodes per second, env steps per second), once time has passed between two samples.
-    fn per_sec(&self) -> Option<(f64, f64)> {
+    pub fn per_sec(&self) -> Option<(f64, f64)> {
         let (&(t0, e0, s0), &(t1, e1, s1)) = (self.samples.front()?, self.samples.back()?);
         let secs = t1.duration_since(t0).as_secs_f64();
         (secs > 0.0).then(|| {
@@ -144,7 +157,7 @@ impl Progress {
         };
         Self {
             bar,
-            rates: Rates::default(),
+            rates: Rates::over(RATE_SPAN),
             plain_interval,
             last_plain: None,
         }
@@ -168,7 +181,7 @@ impl Progress {
 
     /// Forgets the rates (the run went back to a checkpoint).
     pub fn reset_rates(&mut self) {
-        self.rates = Rates::default();
+        self.rates = Rates::over(RATE_SPAN);
     }
 
     /// Removes the line from the terminal and logs where the run ended.
@@ -198,15 +211,21 @@ mod tests {
     #[test]
     fn the_rates_cover_the_recent_span_only() {
         let t0 = Instant::now();
-        let mut rates = Rates::default();
+        let mut rates = Rates::over(RATE_SPAN);
         assert_eq!(rates.per_sec(), None);
         rates.observe(t0, 0, 0);
         assert_eq!(rates.per_sec(), None, "one sample has no rate");
         rates.observe(t0 + Duration::from_secs(30), 0, 0);
         assert_eq!(
+            rates.per_sec(),
+            Some((0.0, 0.0)),
+            "not moving is a rate of 0"
+        );
+        rates.observe(t0 + Duration::from_secs(40), 0, 0);
+        assert_eq!(
             rates.samples.len(),
-            1,
-            "a run that has not moved adds no sample"
+            2,
+            "a run that has not moved only moves the newest sample on"
         );
         // A fast start (100 episodes in the first minute), then 10 episodes a minute.
         rates.observe(t0 + Duration::from_secs(60), 100, 50_000);
@@ -223,6 +242,13 @@ mod tests {
         let (episodes, steps) = rates.per_sec().unwrap();
         assert!((episodes * 60.0 - 10.0).abs() < 1e-9, "{episodes}");
         assert!((steps - 500.0 * 10.0 / 60.0).abs() < 1e-9, "{steps}");
+        // Then it stalls: two minutes later the window holds 170 at minute 8 to 200 at 13
+        // (6 a minute); five minutes later nothing moved in the whole span.
+        rates.observe(t0 + Duration::from_secs(60 * 13), 200, 100_000);
+        let (episodes, _) = rates.per_sec().unwrap();
+        assert!((episodes * 60.0 - 6.0).abs() < 1e-9, "{episodes}");
+        rates.observe(t0 + Duration::from_secs(60 * 16), 200, 100_000);
+        assert_eq!(rates.per_sec(), Some((0.0, 0.0)));
     }
 
     #[test]

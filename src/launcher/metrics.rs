@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use protocol::{Config, MetricsSample, ProcessRole};
 
-use crate::progress::{Figures, Progress};
+use crate::progress::{Figures, Progress, Rates};
 use crate::run::RunContext;
 use crate::tensorboard::EventWriter;
 
@@ -26,6 +26,8 @@ const CSV_COLUMNS: [&str; 9] = [
     "evaluator0/eval/success_rate",
     "evaluator0/eval/train_episodes",
 ];
+/// `launcher/env_steps_per_sec` is the rate over this much of the recent past.
+const RATE_SPAN: Duration = Duration::from_secs(10);
 /// How often `plots/curves.png` is redrawn from `metrics.jsonl`.
 const PLOT_INTERVAL: Duration = Duration::from_secs(60);
 /// How often a plain progress line is logged when stderr is not a terminal.
@@ -40,7 +42,8 @@ pub struct MetricsBook {
     progress: Progress,
     /// The run's budget: `run.max_episodes` and `run.max_env_steps`.
     budget: (u64, Option<u64>),
-    rate: RateMeter,
+    /// Over [`RATE_SPAN`], for `launcher/env_steps_per_sec`.
+    rate: Rates,
     run_dir: std::path::PathBuf,
     last_plot: Instant,
 }
@@ -79,7 +82,7 @@ impl MetricsBook {
             tensorboard,
             progress: Progress::new(PLAIN_PROGRESS_INTERVAL),
             budget: (ctx.config.run.max_episodes, ctx.config.run.max_env_steps),
-            rate: RateMeter::default(),
+            rate: Rates::over(RATE_SPAN),
             run_dir: ctx.run_dir.clone(),
             last_plot: Instant::now(),
         })
@@ -95,7 +98,11 @@ impl MetricsBook {
                 Err(err) => tracing::warn!("skipped a metrics sample: {err:#}"),
             }
         }
-        self.rate.observe(self.get("learner/ingest/env_steps"));
+        self.rate.observe(
+            Instant::now(),
+            self.get("learner/ingest/episodes_completed") as u64,
+            self.get("learner/ingest/env_steps") as u64,
+        );
     }
 
     /// Drops every value of `process` (`learner`, `graph-service`): a restarted process starts
@@ -133,7 +140,7 @@ impl MetricsBook {
                 episodes as f64,
             );
         }
-        self.rate = RateMeter::default();
+        self.rate = Rates::over(RATE_SPAN);
         self.progress.reset_rates();
         Ok(moved)
     }
@@ -187,6 +194,11 @@ impl MetricsBook {
         ]
     }
 
+    /// `launcher/env_steps_per_sec`: 0 until there is a rate.
+    fn steps_per_sec(&self) -> f64 {
+        self.rate.per_sec().map_or(0.0, |(_, steps)| steps)
+    }
+
     pub fn show_progress(&mut self, restarts: u64) {
         let (figures, tail) = (self.figures(), self.tail(restarts));
         self.progress.show(&figures, &tail);
@@ -199,7 +211,7 @@ impl MetricsBook {
         object.insert("wall_secs".to_owned(), serde_json::json!(wall));
         object.insert(
             "launcher/env_steps_per_sec".to_owned(),
-            serde_json::json!(self.rate.per_sec()),
+            serde_json::json!(self.steps_per_sec()),
         );
         object.insert(
             "launcher/actor_restarts".to_owned(),
@@ -216,11 +228,11 @@ impl MetricsBook {
         writeln!(
             self.csv,
             "{wall:.3},{:.1},{restarts},{}",
-            self.rate.per_sec(),
+            self.steps_per_sec(),
             columns.join(",")
         )?;
         let mut scalars: Vec<(&str, f32)> = vec![
-            ("launcher/env_steps_per_sec", self.rate.per_sec() as f32),
+            ("launcher/env_steps_per_sec", self.steps_per_sec() as f32),
             ("launcher/actor_restarts", restarts as f32),
         ];
         scalars.extend(
@@ -268,34 +280,6 @@ fn key_of(sample: &MetricsSample) -> anyhow::Result<String> {
         ProcessRole::Evaluator => format!("evaluator{}", sample.source_id),
     };
     Ok(format!("{process}/{name}"))
-}
-
-/// Env steps per second over a sliding window of recent observations.
-#[derive(Default)]
-struct RateMeter {
-    window: Vec<(Instant, f64)>,
-}
-
-impl RateMeter {
-    const SPAN: Duration = Duration::from_secs(10);
-
-    fn observe(&mut self, steps: f64) {
-        let now = Instant::now();
-        if self.window.last().is_none_or(|&(_, s)| s != steps) {
-            self.window.push((now, steps));
-        }
-        self.window
-            .retain(|&(t, _)| now.duration_since(t) <= Self::SPAN);
-    }
-
-    fn per_sec(&self) -> f64 {
-        match (self.window.first(), self.window.last()) {
-            (Some(&(t0, s0)), Some(&(t1, s1))) if t1 > t0 => {
-                (s1 - s0) / t1.duration_since(t0).as_secs_f64()
-            }
-            _ => 0.0,
-        }
-    }
 }
 
 #[cfg(test)]
