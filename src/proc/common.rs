@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 
 use actor::{GraphTransport, ServiceOracle};
 use anyhow::Context;
+use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use learner::{RouteSource, RoutesReply};
 use nets::TaskDims;
@@ -67,6 +68,29 @@ pub fn node(ctx: &RunContext, role: &str) -> anyhow::Result<Node<Ipc>> {
 /// check) ends them at once, which loses nothing, as they hold no data yet.
 pub fn catch_termination_signals(node: &Node<Ipc>) -> bool {
     node.wait(Duration::ZERO).is_err()
+}
+
+/// A wait set for a process loop: it sleeps until one of the listeners it is given in
+/// [`wake_on`] is notified, or its timeout passes.
+pub fn wait_set() -> anyhow::Result<WaitSet<Ipc>> {
+    WaitSetBuilder::new()
+        .create::<Ipc>()
+        .map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))
+}
+
+/// Attaches `listeners` to `waitset`; each stays attached while its guard lives.
+pub fn wake_on<'w>(
+    waitset: &'w WaitSet<Ipc>,
+    listeners: &[&'w Listener<Ipc>],
+) -> anyhow::Result<Vec<WaitSetGuard<'w, 'w, Ipc>>> {
+    listeners
+        .iter()
+        .map(|listener| {
+            waitset
+                .attach_notification(*listener)
+                .map_err(|e| anyhow::anyhow!("attaching a listener to the wait set: {e:?}"))
+        })
+        .collect()
 }
 
 /// Why a child loop should stop, checked once per iteration without blocking.

@@ -18,10 +18,9 @@ use anyhow::Context;
 use graph_service::checkpoint::{CheckpointError, Resumed, SUBDIR};
 use graph_service::GraphService;
 use iceoryx2::prelude::*;
-use protocol::transport::Ipc;
 use protocol::{ControlCommand, ProcessRole};
 
-use super::common::{newest_weights, node, task_info, MetricsOut, StopWatch};
+use super::common::{newest_weights, node, task_info, wait_set, wake_on, MetricsOut, StopWatch};
 use crate::channels::{Channels, TrajectorySubscriber, WeightsSubscriber};
 use crate::maze_graph_png::{MazeGraphPlot, REDRAW_INTERVAL};
 use crate::run::RunContext;
@@ -52,22 +51,16 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         0,
         config,
     );
-    let waitset = WaitSetBuilder::new()
-        .create::<Ipc>()
-        .map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
-    let _g = [
-        trajectories.listener(),
-        weights.listener(),
-        control.listener(),
-        server.listener(),
-    ]
-    .into_iter()
-    .map(|l| {
-        waitset
-            .attach_notification(l)
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
-    })
-    .collect::<anyhow::Result<Vec<_>>>()?;
+    let waitset = wait_set()?;
+    let _wake = wake_on(
+        &waitset,
+        &[
+            trajectories.listener(),
+            weights.listener(),
+            control.listener(),
+            server.listener(),
+        ],
+    )?;
     let stop = StopWatch::new();
     let mut picture = GraphPicture::new(ctx)?;
     ctx.mark_ready("graph-service")?;
@@ -100,6 +93,17 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     tracing::info!(reason, "graph-service stopping");
     checkpoints.write(&service);
     picture.draw_if_behind(&service);
+    write_final_status(ctx, &service, &start, &checkpoints, reason)
+}
+
+/// `status/graph-service.json`: the service's final counts, how it started and its checkpoints.
+fn write_final_status(
+    ctx: &RunContext,
+    service: &GraphService,
+    start: &Start,
+    checkpoints: &Checkpoints,
+    reason: &str,
+) -> anyhow::Result<()> {
     let stats = service.stats();
     let per_actor: serde_json::Map<String, serde_json::Value> = stats
         .per_actor_steps

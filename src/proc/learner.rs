@@ -24,7 +24,8 @@ use protocol::{
 };
 
 use super::common::{
-    node, task_info, CoverageTracker, GraphRoutes, IpcGraph, MetricsOut, StopWatch,
+    node, task_info, wait_set, wake_on, CoverageTracker, GraphRoutes, IpcGraph, MetricsOut,
+    StopWatch,
 };
 use crate::channels::{Channels, WeightsPublisher};
 use crate::run::RunContext;
@@ -62,15 +63,8 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         0,
         config,
     );
-    let waitset = WaitSetBuilder::new()
-        .create::<Ipc>()
-        .map_err(|e| anyhow::anyhow!("creating a wait set: {e:?}"))?;
-    let _chunks = waitset
-        .attach_notification(trajectories.listener())
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let _control = waitset
-        .attach_notification(control.listener())
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let waitset = wait_set()?;
+    let _wake = wake_on(&waitset, &[trajectories.listener(), control.listener()])?;
     let stop = StopWatch::new();
     publish_weights(ctx, &mut learner, &channels, &node, &mut weights)?;
     send_progress(&progress, &learner)?;
