@@ -54,7 +54,7 @@ use protocol::{ActorId, TrajectoryHeader};
 use crate::maze_graph_png::{MazeGraphPlot, REDRAW_EPISODES};
 use crate::proc::actor::{actor_metrics, ReachMeans};
 use crate::proc::common::{task_info, CoverageTracker, GraphRoutes};
-use crate::proc::evaluator::{append_report, eval_metrics, EvalSchedule};
+use crate::proc::evaluator::{eval_metrics, record_report, EvalSchedule};
 use crate::proc::graph_service::open_service;
 use crate::progress::{Figures, Progress};
 use crate::run::RunContext;
@@ -618,7 +618,7 @@ impl SerialEval {
         if let (Some(evaluator), Some(index)) = (self.evaluator.as_mut(), due) {
             evaluator.load_weights(&header, &bytes)?;
             let report = evaluator.run(index, self.n_episodes)?;
-            append_report(ctx, &report, &header)?;
+            record_report(ctx, evaluator, &report, &header)?;
             self.latest = eval_metrics(&report, &header, self.schedule.skipped(), 0);
         }
         self.last_weights = Some((header, bytes));

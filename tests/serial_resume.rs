@@ -324,6 +324,11 @@ fn a_serial_run_stopped_and_resumed_ends_with_the_metrics_of_an_uninterrupted_on
         4,
         "evaluations at 6, 12, 18 and 24 episodes"
     );
+    let picture = std::fs::read(whole.join("plots/eval_latest.png")).unwrap_or_default();
+    assert!(
+        picture.starts_with(b"\x89PNG"),
+        "serial mode draws the last evaluation as the evaluator process does"
+    );
     for (k, stops) in STOP_CHAINS.into_iter().enumerate() {
         let split = tmp.0.join(format!("split-{stops:?}"));
         // The second chain also writes timed checkpoints at every round boundary where no

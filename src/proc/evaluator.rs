@@ -107,8 +107,6 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         );
     }
     let mut schedule = EvalSchedule::after(config.eval.interval_episodes, done);
-    let plots = ctx.run_dir.join("plots");
-    std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
     let mut n_rejected = 0u64;
     let reason = loop {
         if let Some(reason) = stop.should_stop(&node) {
@@ -142,15 +140,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             0,
             &eval_metrics(&report, &header, schedule.skipped(), n_rejected),
         );
-        append_report(ctx, &report, &header)?;
-        if let Some(maze) = evaluator.maze() {
-            let path = plots.join("eval_latest.png");
-            let all: Vec<[f32; 2]> = report.trajectories.iter().flatten().copied().collect();
-            let goal = report.goals.first().copied().unwrap_or([f32::NAN; 2]);
-            if let Err(err) = envs::render::render_maze_png(maze, &all, goal, &path) {
-                tracing::warn!("evaluation picture not drawn: {err}");
-            }
-        }
+        record_report(ctx, &evaluator, &report, &header)?;
         last_weights = Some((header, bytes));
     };
     if let Some((header, bytes)) = &last_weights {
@@ -227,7 +217,34 @@ pub fn evaluations_done(path: &std::path::Path) -> anyhow::Result<u64> {
     Ok(done)
 }
 
-pub fn append_report(
+/// What an evaluation leaves in the run folder, in process and serial mode alike: its line in
+/// `eval.jsonl` and, on a maze task, `plots/eval_latest.png` (the maze with every evaluation
+/// trajectory and the goal; a picture that cannot be drawn is a warning, not an error).
+pub fn record_report(
+    ctx: &RunContext,
+    evaluator: &Evaluator,
+    report: &EvalReport,
+    header: &WeightsHeader,
+) -> anyhow::Result<()> {
+    append_report(ctx, report, header)?;
+    if let Some(maze) = evaluator.maze() {
+        let plots = ctx.run_dir.join("plots");
+        let all: Vec<[f32; 2]> = report.trajectories.iter().flatten().copied().collect();
+        let goal = report.goals.first().copied().unwrap_or([f32::NAN; 2]);
+        let drawn = std::fs::create_dir_all(&plots)
+            .map_err(|e| e.to_string())
+            .and_then(|()| {
+                envs::render::render_maze_png(maze, &all, goal, &plots.join("eval_latest.png"))
+                    .map_err(|e| e.to_string())
+            });
+        if let Err(err) = drawn {
+            tracing::warn!("evaluation picture not drawn: {err}");
+        }
+    }
+    Ok(())
+}
+
+fn append_report(
     ctx: &RunContext,
     report: &EvalReport,
     header: &WeightsHeader,
