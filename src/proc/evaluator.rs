@@ -231,14 +231,13 @@ pub fn record_report(
         let plots = ctx.run_dir.join("plots");
         let all: Vec<[f32; 2]> = report.trajectories.iter().flatten().copied().collect();
         let goal = report.goals.first().copied().unwrap_or([f32::NAN; 2]);
-        let drawn = std::fs::create_dir_all(&plots)
-            .map_err(|e| e.to_string())
-            .and_then(|()| {
-                envs::render::render_maze_png(maze, &all, goal, &plots.join("eval_latest.png"))
-                    .map_err(|e| e.to_string())
-            });
-        if let Err(err) = drawn {
-            tracing::warn!("evaluation picture not drawn: {err}");
+        let draw = || -> anyhow::Result<()> {
+            std::fs::create_dir_all(&plots)?;
+            envs::render::render_maze_png(maze, &all, goal, &plots.join("eval_latest.png"))?;
+            Ok(())
+        };
+        if let Err(err) = draw() {
+            tracing::warn!("evaluation picture not drawn: {err:#}");
         }
     }
     Ok(())
