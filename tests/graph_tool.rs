@@ -43,6 +43,10 @@ impl Run {
             &name_arg,
             "--set",
             "run.max_episodes=1000000",
+            // One φ round (smoke: at episode 4) and no more: the graph is rebuilt only when φ
+            // changes, so it holds still while the test compares answers of separate queries.
+            "--set",
+            "encoder.interval_episodes=1000000",
         ];
         let child = Command::new(env!("CARGO_BIN_EXE_asi"))
             .args(args)
@@ -108,7 +112,8 @@ impl Run {
         parse_lines(&stdout)
     }
 
-    /// Polls `asi graph stats` until the graph has at least two nodes (after a φ round).
+    /// Polls `asi graph stats` until the graph of the first trained φ (version ≥ 1: the run's
+    /// only φ round) has at least two nodes.
     fn wait_for_graph(&mut self) -> HashMap<String, String> {
         let deadline = Instant::now() + WATCHDOG;
         loop {
@@ -122,7 +127,7 @@ impl Run {
             let out = self.graph(&["stats"]);
             if out.status.success() {
                 let stats = parse_lines(&String::from_utf8_lossy(&out.stdout));
-                if number(&stats, "nodes") >= 2.0 {
+                if number(&stats, "phi_version") >= 1.0 && number(&stats, "nodes") >= 2.0 {
                     return stats;
                 }
             }
@@ -189,7 +194,8 @@ fn route(fields: &HashMap<String, String>) -> Vec<[f32; 2]> {
 fn asi_graph_answers_every_question_about_a_running_smoke_training_and_refuses_a_stopped_one() {
     let mut run = Run::start("all");
     let stats = run.wait_for_graph();
-    assert!(number(&stats, "graph_version") >= 1.0, "{stats:?}");
+    let graph_version = number(&stats, "graph_version");
+    assert!(graph_version >= 1.0, "{stats:?}");
     assert!(number(&stats, "stored_steps") > 0.0, "{stats:?}");
 
     let png = run.dir.join("graph.png");
@@ -215,6 +221,9 @@ fn asi_graph_answers_every_question_about_a_running_smoke_training_and_refuses_a
         );
         let to_arg = format!("{},{}", target[0], target[1]);
         let direct = run.ask(&["route", "--from", &from_arg, "--to", &to_arg]);
+        for reply in [&dump, &frontier, &direct] {
+            assert_eq!(number(reply, "graph_version"), graph_version, "{reply:?}");
+        }
         let direct_path = route(&direct);
         assert_eq!(direct_path.first(), path.first(), "same start node");
         assert_eq!(direct_path.last(), Some(&target));

@@ -15,6 +15,10 @@ use serde_json::Value;
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 /// Upper bound for one smoke run on a loaded 2-core machine; past it the run is killed.
 const WATCHDOG: Duration = Duration::from_secs(600);
+/// Checkpoints only at clean stops (the interval is not part of the config fingerprint), so a
+/// launch leaves exactly one checkpoint however slow the machine: smoke's 30 s timer would add
+/// one to a launch that takes longer on a loaded machine. Every launch here sets it.
+const NO_INTERVAL: &str = "run.checkpoint_interval_mins=600";
 
 /// A unique run folder, removed at the end of the test.
 struct RunDir(PathBuf);
@@ -57,8 +61,8 @@ impl Drop for RunDir {
     }
 }
 
-/// Runs `asi train` on the smoke config in `dir` to its end (unique run name), killing it at
-/// the watchdog; returns its output.
+/// Runs `asi train` on the smoke config in `dir` to its end (unique run name, [`NO_INTERVAL`]),
+/// killing it at the watchdog; returns its output.
 fn train(dir: &RunDir, extra: &[&str]) -> Output {
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -75,7 +79,7 @@ fn train(dir: &RunDir, extra: &[&str]) -> Output {
         "--run-dir",
         &dir_arg,
     ];
-    args.extend(["--set", &name]);
+    args.extend(["--set", &name, "--set", NO_INTERVAL]);
     args.extend(extra);
     let child = Command::new(env!("CARGO_BIN_EXE_asi"))
         .args(&args)
@@ -376,13 +380,9 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
 fn a_run_killed_between_checkpoints_resumes_with_its_curves_cut_at_the_checkpoint() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = RunDir::new("killed");
-    // Checkpoints only at clean stops, so the killed launch leaves none of its own.
-    let no_interval = "run.checkpoint_interval_mins=600";
-    train_ok(
-        &dir,
-        &["--set", "run.max_episodes=6", "--set", no_interval],
-        "first launch",
-    );
+    // Checkpoints only at clean stops ([`NO_INTERVAL`]), so the killed launch leaves none of
+    // its own.
+    train_ok(&dir, &["--set", "run.max_episodes=6"], "first launch");
     let before = dir.status("learner");
     let steps = as_u64(&before, "env_steps");
     let lines_at_checkpoint = env_steps_per_line(&dir.0).len();
@@ -399,7 +399,7 @@ fn a_run_killed_between_checkpoints_resumes_with_its_curves_cut_at_the_checkpoin
             "--set",
             &budget,
             "--set",
-            no_interval,
+            NO_INTERVAL,
         ])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdin(Stdio::null())
@@ -437,7 +437,7 @@ fn a_run_killed_between_checkpoints_resumes_with_its_curves_cut_at_the_checkpoin
 
     // The resume moves what the killed launch wrote aside and writes that stretch again.
     let budget = format!("run.max_episodes={}", as_u64(&before, "episodes") + 6);
-    let resumed = train_ok(&dir, &["--set", &budget, "--set", no_interval], "resume");
+    let resumed = train_ok(&dir, &["--set", &budget], "resume");
     let stdout = String::from_utf8_lossy(&resumed.stdout);
     assert!(
         stdout.contains(&format!("resuming from checkpoint 1 (env steps {steps})")),
@@ -493,15 +493,10 @@ fn files_of(folder: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
 fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_an_empty_store() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = RunDir::new("corrupt-graph");
-    // Checkpoints only at the clean stops (the interval is not part of the config fingerprint),
-    // so the first launch leaves exactly one graph-service checkpoint however slow the machine,
-    // and the second launch cannot prune the damaged one with interval checkpoints.
-    let no_interval = "run.checkpoint_interval_mins=600";
-    train_ok(
-        &dir,
-        &["--set", "run.max_episodes=6", "--set", no_interval],
-        "first launch",
-    );
+    // Checkpoints only at the clean stops ([`NO_INTERVAL`]): the first launch leaves exactly
+    // one graph-service checkpoint, and the second cannot prune the damaged one with interval
+    // checkpoints.
+    train_ok(&dir, &["--set", "run.max_episodes=6"], "first launch");
     assert_eq!(dir.checkpoints(), ["ckpt-000001"]);
     let graph_dir = dir.0.join("checkpoints/graph-service");
     let graph_ckpts = || names_in(&graph_dir);
@@ -526,7 +521,7 @@ fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_a
     let damaged_files = files_of(&damaged);
 
     // The learner resumed from its own checkpoint and trained on.
-    resume_six_more(&dir, &before, &["--set", no_interval]);
+    resume_six_more(&dir, &before, &[]);
     // The graph-service refused its only checkpoint, naming the file, and started empty.
     let graph_after = dir.status("graph-service");
     assert!(graph_after["restored_from"].is_null(), "{graph_after}");

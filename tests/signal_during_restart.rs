@@ -38,8 +38,8 @@ fn sigterm_while_a_crashed_learner_waits_for_its_restart_stops_the_run_cleanly()
         "configs/smoke.toml",
         &["--actors", "2", "--set", "run.max_episodes=1000000"],
     );
-    run.wait_until("the learner ingested data", |dir| {
-        learner_steps_now(dir) > 0
+    run.wait_until("both actors published data", |dir| {
+        every_actor_published(dir, 2)
     });
     let run_id = run.run_id();
     let learner = pid_of(&run.dir, "learner").expect("learner pid file");

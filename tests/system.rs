@@ -157,8 +157,8 @@ fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() 
 fn sigterm_stops_every_process_cleanly_and_leaves_no_shared_memory() {
     let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let mut run = start("sigterm", &["--set", "run.max_episodes=1000000"]);
-    run.wait_until("the learner ingested data", |dir| {
-        learner_steps_in_metrics(dir) > 0
+    run.wait_until("both actors published data", |dir| {
+        every_actor_published(dir, 2)
     });
     signal(run.child.id(), libc::SIGTERM);
     let status = run.wait();

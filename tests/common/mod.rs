@@ -257,6 +257,24 @@ pub fn learner_steps_now(dir: &Path) -> u64 {
         .unwrap_or(0.0) as u64
 }
 
+/// Whether each of actors `0..n_actors` has published steps by `metrics.jsonl` (an actor
+/// reports metrics only after sending a chunk). Tests that stop a run early and then check
+/// every actor's data wait for this: on a loaded machine one actor can start seconds after
+/// the other, long after the learner ingested the first one's data.
+pub fn every_actor_published(dir: &Path, n_actors: usize) -> bool {
+    let text = std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap_or_default();
+    let lines: Vec<Value> = text
+        .lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .collect();
+    (0..n_actors).all(|k| {
+        let key = format!("actor{k}/actor/env_steps");
+        lines
+            .iter()
+            .any(|v| v.get(&key).and_then(Value::as_f64).is_some_and(|s| s > 0.0))
+    })
+}
+
 /// iceoryx2 services whose names contain the run id (they must all be gone after a run).
 pub fn services_of(run_id: &str) -> Vec<String> {
     use iceoryx2::prelude::*;
