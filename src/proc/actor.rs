@@ -27,11 +27,14 @@ pub struct ActorArgs {
 
 pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
     let config = &ctx.config;
+    // Signals are caught from here on: a SIGTERM while the env and networks are built stops
+    // the actor at its first check, with its status written.
+    let node = node(ctx, &format!("actor-{}", args.actor_id))?;
+    let mut stop = StopWatch::new(&node);
     let mut actor = Actor::new(config, ActorId(args.actor_id), config.run.seed)
         .context("building the actor")?;
     let warm_up = actor::warm_up_share(config, args.run_episodes);
     actor.start_at_episode(first_episode(args.incarnation), warm_up)?;
-    let node = node(ctx, &format!("actor-{}", args.actor_id))?;
     let channels = Channels::new(config, &ctx.run_id, &actor.layout());
     let trajectories = channels.trajectory_publisher(&node)?;
     let weights = channels.weights_subscriber(&node)?;
@@ -44,7 +47,6 @@ pub fn run(ctx: &RunContext, args: &ActorArgs) -> anyhow::Result<()> {
         args.actor_id,
         config,
     );
-    let stop = StopWatch::new();
     let mut throttle = Throttle::default();
     let mut published_steps = 0u64;
     let mut published_chunks = 0u64;

@@ -59,13 +59,17 @@ pub fn node(ctx: &RunContext, role: &str) -> anyhow::Result<Node<Ipc>> {
     Ok(open_node(&ctx.run_id.node_name(role))?)
 }
 
+/// The stop reason of a caught SIGINT/SIGTERM.
+const SIGNALLED: &str = "termination signal";
+
 /// Installs iceoryx2's SIGINT/SIGTERM handlers now and says whether a termination signal has
 /// arrived since (the check consumes it). iceoryx2 installs its handlers lazily, on a process's
 /// first termination check (`Node::wait`), not when the node is created; until then SIGTERM has
-/// its default action and ends the process at once. The launcher calls this before it spawns
-/// anything, so that a signal while the services start is caught and stops them in order. The
-/// children do not: a SIGTERM during their own start-up (before their first [`StopWatch`]
-/// check) ends them at once, which loses nothing, as they hold no data yet.
+/// its default action and ends the process at once, so no signal can come before the handlers
+/// and be lost. The launcher calls this before it spawns anything, so that a signal while the
+/// services start is caught and stops them in order; each child through [`StopWatch::new`]. A
+/// SIGTERM before that (process start, the services' restore) ends a child at once, which
+/// loses nothing: it has published nothing yet.
 pub fn catch_termination_signals(node: &Node<Ipc>) -> bool {
     node.wait(Duration::ZERO).is_err()
 }
@@ -96,20 +100,31 @@ pub fn wake_on<'w>(
 /// Why a child loop should stop, checked once per iteration without blocking.
 pub struct StopWatch {
     parent: u32,
+    /// A signal seen while the handlers were installed, reported by the first check.
+    pending: Option<&'static str>,
 }
 
 impl StopWatch {
-    pub fn new() -> Self {
+    /// Installs iceoryx2's signal handlers now ([`catch_termination_signals`]): from here on a
+    /// SIGTERM is caught and reported by [`StopWatch::should_stop`] instead of ending the
+    /// process. Actors and the evaluator create it right after their node, before building
+    /// their env and networks; the services only after their restore (a restore that hangs
+    /// must still end on the launcher's SIGTERM).
+    pub fn new(node: &Node<Ipc>) -> Self {
         Self {
             parent: std::os::unix::process::parent_id(),
+            pending: catch_termination_signals(node).then_some(SIGNALLED),
         }
     }
 
     /// A termination signal arrived (iceoryx2's handler), or the launcher died (we were
     /// re-parented), in which case nobody would ever stop us.
-    pub fn should_stop(&self, node: &Node<Ipc>) -> Option<&'static str> {
+    pub fn should_stop(&mut self, node: &Node<Ipc>) -> Option<&'static str> {
+        if let Some(reason) = self.pending.take() {
+            return Some(reason);
+        }
         if node.wait(Duration::ZERO).is_err() {
-            return Some("termination signal");
+            return Some(SIGNALLED);
         }
         if std::os::unix::process::parent_id() != self.parent {
             return Some("launcher exited");
@@ -356,8 +371,9 @@ mod tests {
 
     /// Runs in its own process (the parent test re-executes the test binary with only this
     /// test selected), since a signal handler is process-wide: raises SIGTERM after the early
-    /// check and expects the next check to see it. Without the early check the default action
-    /// ends the process with the signal, which the parent test reports.
+    /// check and expects the next check to see it, then the same through [`StopWatch`].
+    /// Without the early check the default action ends the process with the signal, which the
+    /// parent test reports.
     #[test]
     #[ignore = "run by a_sigterm_after_the_early_check_is_caught_not_fatal in a child process"]
     fn signal_child() {
@@ -370,6 +386,20 @@ mod tests {
         // SAFETY: raising a signal in the own process; the handler installed above runs.
         assert_eq!(unsafe { libc::raise(libc::SIGTERM) }, 0);
         assert!(node.wait(Duration::ZERO).is_err(), "the SIGTERM was seen");
+
+        // A stop watch reports a signal at its next check, once.
+        let mut stop = StopWatch::new(&node);
+        assert_eq!(stop.should_stop(&node), None);
+        // SAFETY: as above.
+        assert_eq!(unsafe { libc::raise(libc::SIGTERM) }, 0);
+        assert_eq!(stop.should_stop(&node), Some(SIGNALLED));
+        assert_eq!(stop.should_stop(&node), None, "reported once");
+        // A signal that the watch's own installation consumed is kept for its first check.
+        // SAFETY: as above.
+        assert_eq!(unsafe { libc::raise(libc::SIGTERM) }, 0);
+        let mut late = StopWatch::new(&node);
+        assert_eq!(late.should_stop(&node), Some(SIGNALLED));
+        assert_eq!(late.should_stop(&node), None, "reported once");
     }
 
     #[test]

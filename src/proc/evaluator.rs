@@ -84,11 +84,13 @@ pub fn eval_seed(config: &protocol::Config) -> u64 {
 pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let config = &ctx.config;
     let info = task_info(config)?;
+    // Signals are caught from here on (see the actor).
+    let node = node(ctx, "evaluator")?;
+    let mut stop = StopWatch::new(&node);
     let mut evaluator =
         Evaluator::new(config, eval_seed(config)).context("building the evaluator")?;
     let mut saver = WeightsSaver::new(&ctx.run_dir);
     let mut last_weights = None;
-    let node = node(ctx, "evaluator")?;
     let channels = Channels::new(config, &ctx.run_id, &info.layout);
     let weights = channels.weights_subscriber(&node)?;
     let mut metrics = MetricsOut::new(
@@ -97,7 +99,6 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         0,
         config,
     );
-    let stop = StopWatch::new();
     let eval_file = ctx.run_dir.join(EVAL_FILE);
     let done = evaluations_done(&eval_file)?;
     if done > 0 {

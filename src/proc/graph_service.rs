@@ -61,7 +61,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
             server.listener(),
         ],
     )?;
-    let stop = StopWatch::new();
+    let mut stop = StopWatch::new(&node);
     let mut picture = GraphPicture::new(ctx)?;
     ctx.mark_ready("graph-service")?;
     let mut first_chunk = FirstChunk::new(&service, started);

@@ -65,7 +65,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     );
     let waitset = wait_set()?;
     let _wake = wake_on(&waitset, &[trajectories.listener(), control.listener()])?;
-    let stop = StopWatch::new();
+    let mut stop = StopWatch::new(&node);
     publish_weights(ctx, &mut learner, &channels, &node, &mut weights)?;
     send_progress(&progress, &learner)?;
     ctx.mark_ready("learner")?;
