@@ -285,10 +285,14 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
     let after = resume_six_more(&dir, &before, &[]);
     // The resumed launch's actors are their second starts in the folder: fresh episode ids
     // and env seeds, and no second random warm-up (before, both started again at episode 0).
-    for actor in 0..2 {
-        let second = dir.status(&format!("actor-{actor}-1"));
-        assert!(as_u64(&second, "published_steps") > 0, "{second}");
-        assert_eq!(as_u64(&second, "random_decisions"), 0, "{second}");
+    // The 6 episodes may all be one actor's when the other starts late on a loaded machine.
+    let seconds: Vec<Value> = (0..2)
+        .map(|actor| dir.status(&format!("actor-{actor}-1")))
+        .collect();
+    let published: u64 = seconds.iter().map(|s| as_u64(s, "published_steps")).sum();
+    assert!(published > 0, "{seconds:?}");
+    for second in &seconds {
+        assert_eq!(as_u64(second, "random_decisions"), 0, "{second}");
     }
     let starts: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.0.join("process_starts.json")).unwrap())
