@@ -154,6 +154,34 @@ impl Checksum {
     }
 }
 
+/// The versions of the manifest at `path`, `(format, protocol)`, against the reader's
+/// `current` format (from 2 on) and `protocol` version: the checksum its files are listed
+/// with, or [`FileError::Incompatible`] naming the version that differs.
+pub fn check_versions(
+    path: &Path,
+    (format, protocol_found): (u32, u32),
+    current: u32,
+    protocol: u32,
+) -> Result<Checksum, FileError> {
+    let sum = Checksum::of_format(format, current).ok_or_else(|| {
+        incompatible(
+            path,
+            "format version",
+            format!("{current} (or 1)"),
+            format.to_string(),
+        )
+    })?;
+    if protocol_found != protocol {
+        return Err(incompatible(
+            path,
+            "protocol version",
+            protocol.to_string(),
+            protocol_found.to_string(),
+        ));
+    }
+    Ok(sum)
+}
+
 /// The reflected ECMA-182 polynomial of CRC-64/XZ.
 const CRC64_POLY: u64 = 0xc96c_5795_d787_0f42;
 
@@ -636,6 +664,39 @@ mod tests {
             }
         }
         !crc
+    }
+
+    #[test]
+    fn check_versions_reads_format_1_and_the_current_one_and_names_what_differs() {
+        let path = Path::new("/run/checkpoints/ckpt-000003/manifest.json");
+        assert_eq!(
+            check_versions(path, (1, 7), 3, 7).unwrap(),
+            Checksum::Fnv1aWords
+        );
+        assert_eq!(check_versions(path, (3, 7), 3, 7).unwrap(), Checksum::Crc64);
+        for (versions, differs, expected, found) in [
+            ((2, 7), "format version", "3 (or 1)", "2"),
+            ((4, 7), "format version", "3 (or 1)", "4"),
+            ((3, 6), "protocol version", "7", "6"),
+            // An unreadable format is named before the protocol.
+            ((4, 6), "format version", "3 (or 1)", "4"),
+        ] {
+            match check_versions(path, versions, 3, 7) {
+                Err(FileError::Incompatible {
+                    path: p,
+                    what,
+                    expected: e,
+                    found: f,
+                }) => {
+                    assert_eq!(p, path, "{versions:?}");
+                    assert_eq!(
+                        (what.as_str(), e.as_str(), f.as_str()),
+                        (differs, expected, found)
+                    );
+                }
+                other => panic!("{versions:?}: {other:?}"),
+            }
+        }
     }
 
     #[test]

@@ -314,20 +314,8 @@ fn check_compatible(
     let differ = |what: &str, expected: String, found: String| -> CheckpointError {
         ckpt::incompatible(path, what, expected, found).into()
     };
-    let Some(sum) = Checksum::of_format(manifest.format_version, FORMAT_VERSION) else {
-        return Err(differ(
-            "format version",
-            format!("{FORMAT_VERSION} (or 1)"),
-            manifest.format_version.to_string(),
-        ));
-    };
-    if manifest.protocol_version != PROTOCOL_VERSION {
-        return Err(differ(
-            "protocol version",
-            PROTOCOL_VERSION.to_string(),
-            manifest.protocol_version.to_string(),
-        ));
-    }
+    let versions = (manifest.format_version, manifest.protocol_version);
+    let sum = ckpt::check_versions(path, versions, FORMAT_VERSION, PROTOCOL_VERSION)?;
     let ours = service.shape();
     for (key, expected) in &ours {
         let found = manifest.shape.get(key).cloned();

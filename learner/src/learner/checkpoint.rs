@@ -336,20 +336,8 @@ fn check_compatible(
     let differ = |what: &str, expected: String, found: String| {
         Err(ckpt::incompatible(path, what, expected, found).into())
     };
-    let Some(sum) = Checksum::of_format(manifest.format_version, FORMAT_VERSION) else {
-        return differ(
-            "format version",
-            format!("{FORMAT_VERSION} (or 1)"),
-            manifest.format_version.to_string(),
-        );
-    };
-    if manifest.protocol_version != PROTOCOL_VERSION {
-        return differ(
-            "protocol version",
-            PROTOCOL_VERSION.to_string(),
-            manifest.protocol_version.to_string(),
-        );
-    }
+    let versions = (manifest.format_version, manifest.protocol_version);
+    let sum = ckpt::check_versions(path, versions, FORMAT_VERSION, PROTOCOL_VERSION)?;
     let layout = learner.weights_layout_hash();
     if manifest.layout_hash != layout {
         return differ(
