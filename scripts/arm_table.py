@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """One metric of several arms and seeds, by training episode, with paired differences.
 
-    scripts/arm_table.py --at 150,200,300 [--metric M] [--base ARM] [--over A-B] RUN_DIR...
+    scripts/arm_table.py --at 150,200,300 [--metric M] [--base ARM] [--over A-B] [--factorial]
+        RUN_DIR...
 
 Runs are grouped into arms by folder name without the `_s<seed>` tag, as `asi plot` does
 (runs/ant-u/asi_s0 and runs/ant-u/asi_s1 are seeds 0 and 1 of arm `asi`). For every arm it
@@ -12,7 +13,12 @@ With `--base ARM` (e.g. hess) it adds, for every other arm, the paired differenc
 (same seed) at each episode, mean ± sample standard deviation over the seeds both arms have,
 and over `--over A-B` (default: the first to the last episode of `--at`) the mean paired
 difference of the per-episode values and the number of episodes where the seed mean of the
-arm is above the base's. Standard library only; a run that has not reached an episode shows
+arm is above the base's. With `--factorial` it reads the four arms of claim 1 (asi,
+asi-no-fr, asi-no-si, hess) as a two-by-two design, FR on or off by SI on or off: at each
+episode of `--at`, FR's effect with SI on and off, SI's with FR on and off, and their
+interaction (FR with SI − FR without SI), paired by seed over the seeds that have all four
+arms there, mean ± sd with the one-sample t statistic; then each seed's values at the last
+episode. Standard library only; a run that has not reached an episode shows
 `-` there. Under the tables, the notes of scripts/launch_history.py on the runs' launch
 histories (resumes that were not bit-exact, several builds or CPUs), when there are any.
 """
@@ -81,6 +87,8 @@ def main():
     parser.add_argument("--metric", default="learner/charts/coverage")
     parser.add_argument("--base", help="arm the others are paired against (e.g. hess)")
     parser.add_argument("--over", help="episode range FIRST-LAST for the whole-run figures")
+    parser.add_argument("--factorial", action="store_true",
+                        help="FR × SI table of the arms " + ", ".join(FACTORIAL_ARMS))
     args = parser.parse_args()
     try:
         at = [int(e) for e in args.at.split(",")]
@@ -96,6 +104,9 @@ def main():
         arms[arm][seed] = per_episode(f"{run}/metrics.jsonl", args.metric)
     if args.base and args.base not in arms:
         parser.error(f"--base {args.base}: no run of that arm among {sorted(arms)}")
+    missing = [a for a in FACTORIAL_ARMS if a not in arms]
+    if args.factorial and missing:
+        parser.error(f"--factorial: no run of {', '.join(missing)} among {sorted(arms)}")
 
     print(f"{args.metric}, mean over seeds (seeds in brackets), by training episode")
     print("| arm | " + " | ".join(str(e) for e in at) + " |")
@@ -109,6 +120,8 @@ def main():
         print(f"| {arm} (seeds {', '.join(map(str, sorted(seeds)))}) | " + " | ".join(cells) + " |")
     if args.base:
         paired(arms, args.base, at, lo, hi)
+    if args.factorial:
+        factorial(arms, at)
     found = launch_history.notes(args.runs)
     if found:
         print("\nlaunch histories (scripts/launch_history.py):")
@@ -147,6 +160,54 @@ def paired(arms, base_arm, at, lo, hi):
                 counted += 1
                 above += statistics.mean(p[0] - p[1] for p in pairs) > 1e-12  # not float noise
         print(f"| {arm} | " + " | ".join(cells) + f" | {mean_sd(run_means)} | {above} of {counted} |")
+
+
+FACTORIAL_ARMS = ("asi", "asi-no-fr", "asi-no-si", "hess")
+# Each row of the FR × SI table: its name and the signs of asi, asi-no-fr, asi-no-si, hess.
+FACTORIAL_ROWS = (
+    ("FR with SI on (asi − asi-no-fr)", (1, -1, 0, 0)),
+    ("FR with SI off (asi-no-si − hess)", (0, 0, 1, -1)),
+    ("SI with FR on (asi − asi-no-si)", (1, 0, -1, 0)),
+    ("SI with FR off (asi-no-fr − hess)", (0, 1, 0, -1)),
+    ("interaction (FR with SI − FR without SI)", (1, -1, -1, 1)),
+)
+
+
+def t_statistic(xs):
+    """Mean over its standard error; None for fewer than two values or no spread."""
+    if len(xs) < 2 or statistics.stdev(xs) == 0:
+        return None
+    return statistics.mean(xs) / (statistics.stdev(xs) / len(xs) ** 0.5)
+
+
+def factorial(arms, at):
+    """The FR × SI table: each row's paired contrast at each episode of `at`, over the seeds
+    with all four arms there; then each seed's contrasts at the last episode."""
+
+    def contrasts(episode):
+        """{seed: [contrast of each row]} for the seeds with all four arms at `episode`."""
+        out = {}
+        for seed in sorted(set.intersection(*(set(arms[a]) for a in FACTORIAL_ARMS))):
+            values = [at_or_after(arms[a][seed], episode) for a in FACTORIAL_ARMS]
+            if None not in values:
+                out[seed] = [sum(c * v for c, v in zip(signs, values)) for _, signs in FACTORIAL_ROWS]
+        return out
+
+    by_episode = {episode: contrasts(episode) for episode in at}
+    print("\nFR × SI, paired by seed (mean ± sd over seeds, t = mean / standard error)")
+    print("| difference | " + " | ".join(str(e) for e in at) + " |")
+    for row, (name, _) in enumerate(FACTORIAL_ROWS):
+        cells = []
+        for episode in at:
+            xs = [c[row] for c in by_episode[episode].values()]
+            t = t_statistic(xs)
+            cells.append(mean_sd(xs) + ("" if t is None else f" (t = {t:.2f})"))
+        print(f"| {name} | " + " | ".join(cells) + " |")
+    print("| seeds | " + " | ".join(", ".join(map(str, by_episode[e])) or "-" for e in at) + " |")
+    last = by_episode[at[-1]]
+    print(f"\nby seed at {at[-1]} ({' / '.join(map(str, last))})")
+    for row, (name, _) in enumerate(FACTORIAL_ROWS):
+        print(f"| {name} | " + " / ".join(f"{c[row]:+.3f}" for c in last.values()) + " |")
 
 
 if __name__ == "__main__":

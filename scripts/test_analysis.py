@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Tests of the analysis scripts (fr_trace.py with --frontiers, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
-count_choice.py, launch_history.py and arm_table.py's notes) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
+count_choice.py, launch_history.py, arm_table.py's notes and its FR × SI table) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
 
     python3 scripts/test_analysis.py
 
@@ -761,6 +761,57 @@ class LaunchHistory(unittest.TestCase):
         out = subprocess.run([sys.executable, script, "--at", "20", clean],
                              capture_output=True, text=True, check=True).stdout
         self.assertNotIn("launch histories", out)
+
+
+class Factorial(unittest.TestCase):
+    """arm_table.py --factorial on two seeds of the four arms, coverage at episode 20."""
+
+    # Coverage of asi, asi-no-fr, asi-no-si, hess. Seed 0: FR with SI on .60 − .50 = +.10,
+    # FR with SI off .55 − .52 = +.03, SI with FR on .60 − .55 = +.05, SI with FR off
+    # .50 − .52 = −.02, interaction .10 − .03 = +.07. Seed 1: −.05, +.04, −.10, −.01, −.09.
+    # Means: +.025, +.035, −.025, −.015, −.010. Sample sd of two values is |a − b| / √2:
+    # .15 / √2 = .106, .01 / √2 = .007, .106, .007, .16 / √2 = .113. t = mean / (sd / √2):
+    # .025 / .075 = 0.33, .035 / .005 = 7.00, −0.33, −.015 / .005 = −3.00, −.010 / .08 = −0.125.
+    COVERAGE = {0: (0.60, 0.50, 0.55, 0.52), 1: (0.40, 0.45, 0.50, 0.46)}
+
+    def table(self, *runs):
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "arm_table.py")
+        return subprocess.run([sys.executable, script, "--at", "10,20", "--factorial", *runs],
+                              capture_output=True, text=True)
+
+    def test_the_two_by_two_contrasts_paired_by_seed(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            runs = []
+            for seed, values in self.COVERAGE.items():
+                for arm, value in zip(("asi", "asi-no-fr", "asi-no-si", "hess"), values):
+                    path = os.path.join(tmp, f"{arm}_s{seed}")
+                    os.makedirs(path)
+                    with open(os.path.join(path, "metrics.jsonl"), "w") as out:
+                        for episode, coverage in ((10, 0.1), (20, value)):
+                            out.write(json.dumps({"learner/schedule/train_episodes": episode,
+                                                  "learner/charts/coverage": coverage}) + "\n")
+                    runs.append(path)
+            done = self.table(*runs)
+            self.assertEqual(done.returncode, 0, done.stderr)
+            table, by_seed = done.stdout.split("by seed at 20 (0 / 1)\n")
+            rows = {line.split(" | ")[0].lstrip("| "): line for line in table.splitlines()}
+            # At episode 10 every arm has 0.1: every contrast is 0 with no spread, so no t.
+            self.assertEqual(rows["FR with SI on (asi − asi-no-fr)"],
+                             "| FR with SI on (asi − asi-no-fr) | +0.000 ± 0.000 | +0.025 ± 0.106 (t = 0.33) |")
+            self.assertIn("| +0.035 ± 0.007 (t = 7.00) |", rows["FR with SI off (asi-no-si − hess)"])
+            self.assertIn("| -0.025 ± 0.106 (t = -0.33) |", rows["SI with FR on (asi − asi-no-si)"])
+            self.assertIn("| -0.015 ± 0.007 (t = -3.00) |", rows["SI with FR off (asi-no-fr − hess)"])
+            self.assertIn("| -0.010 ± 0.113 (t = -0.1", rows["interaction (FR with SI − FR without SI)"])
+            self.assertIn("| seeds | 0, 1 | 0, 1 |", done.stdout)
+            by_seed = by_seed.splitlines()
+            self.assertEqual(by_seed[0], "| FR with SI on (asi − asi-no-fr) | +0.100 / -0.050 |")
+            self.assertEqual(by_seed[4], "| interaction (FR with SI − FR without SI) | +0.070 / -0.090 |")
+            # A seed without all four arms is left out; an arm missing everywhere is an error.
+            done = self.table(*runs[:-1])
+            self.assertIn("| seeds | 0 | 0 |", done.stdout)
+            done = self.table(*[r for r in runs if "hess" not in r])
+            self.assertNotEqual(done.returncode, 0)
+            self.assertIn("--factorial: no run of hess", done.stderr)
 
 
 if __name__ == "__main__":
