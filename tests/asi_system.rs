@@ -8,11 +8,8 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::sync::Mutex;
 
-use common::Run;
-
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+use common::{one_run_at_a_time, Run};
 
 /// `asi train` on the smoke config with two actors (see [`common::Run`]).
 fn start(test: &str, extra: &[&str]) -> Run {
@@ -40,7 +37,7 @@ fn sum(metrics: &BTreeMap<String, f64>, suffix: &str) -> f64 {
 
 #[test]
 fn fr_episodes_and_si_steps_run_when_on_and_stay_at_zero_when_off() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut on = start(
         "on",
         &[

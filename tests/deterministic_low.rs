@@ -8,11 +8,8 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::sync::Mutex;
 
-use common::Run;
-
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+use common::{one_run_at_a_time, Run};
 
 const DETERMINISTIC: &str = "learner.low.algo=\"deterministic\"";
 
@@ -50,7 +47,7 @@ fn assert_trained(metrics: &BTreeMap<String, f64>) {
 
 #[test]
 fn a_serial_smoke_run_trains_the_deterministic_low_level_with_finite_losses() {
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_run_at_a_time();
     let mut run = Run::start(
         "deterministic-serial",
         "configs/smoke.toml",
@@ -72,7 +69,7 @@ fn a_serial_smoke_run_trains_the_deterministic_low_level_with_finite_losses() {
 
 #[test]
 fn in_process_mode_the_actors_act_with_the_published_deterministic_weights() {
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_run_at_a_time();
     let mut run = Run::start(
         "deterministic-process",
         "configs/smoke.toml",

@@ -27,7 +27,6 @@ mod common;
 use std::cell::RefCell;
 use std::collections::BTreeSet;
 use std::path::Path;
-use std::sync::Mutex;
 use std::time::Instant;
 
 use common::*;
@@ -35,8 +34,6 @@ use rand::seq::SliceRandom;
 use rand::Rng;
 use serde_json::Value;
 
-/// One training run at a time on the two CI cores.
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 /// Env-step budget of the run (`run.max_env_steps`).
 const BUDGET: u64 = 15_000;
 /// `transport.chunk_steps` of `configs/smoke.toml`.
@@ -203,7 +200,7 @@ fn kill_and_wait(
 
 #[test]
 fn a_run_survives_sigkills_of_every_process_kind_and_loses_only_what_crashes_must_lose() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut rng = rand::rng();
     let plan = plan(&mut rng);
     let budget = format!("run.max_env_steps={BUDGET}");
@@ -485,7 +482,7 @@ fn print_figures(kills: &[Kill], wall_secs: f64) {
 
 #[test]
 fn a_crash_loop_stops_the_run_with_an_error_naming_the_process_and_its_log() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut run = Run::start(
         "crash-loop",
         "configs/smoke.toml",

@@ -5,6 +5,8 @@
 //! Same patterns as `tests/system.rs`: a unique run folder and run name, a watchdog that kills
 //! the run if it hangs, and cleanup of the folder and processes on drop.
 
+mod common;
+
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output, Stdio};
@@ -192,6 +194,7 @@ fn route(fields: &HashMap<String, String>) -> Vec<[f32; 2]> {
 
 #[test]
 fn asi_graph_answers_every_question_about_a_running_smoke_training_and_refuses_a_stopped_one() {
+    let _slot = common::one_run_at_a_time();
     let mut run = Run::start("all");
     let stats = run.wait_for_graph();
     let graph_version = number(&stats, "graph_version");

@@ -18,13 +18,9 @@ use std::collections::BTreeMap;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::ExitStatus;
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use common::*;
-
-/// One training run at a time on the two CI cores.
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// A failed start ends within seconds; past this the launcher hangs: the run is killed and the
 /// test fails.
@@ -152,7 +148,7 @@ fn check_stopped_cleanly(run: &Run, status: ExitStatus, before: &BTreeMap<PathBu
 #[test]
 fn a_learner_that_refuses_its_checkpoint_stops_the_start_with_an_error_naming_it_its_reason_and_log(
 ) {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let dir = folder_with_checkpoints("startup-learner-exits");
     let policy = dir.join(CHECKPOINT).join("policy.safetensors");
     let mut bytes = std::fs::read(&policy).unwrap();
@@ -185,7 +181,7 @@ fn a_learner_that_refuses_its_checkpoint_stops_the_start_with_an_error_naming_it
 #[test]
 fn a_learner_that_never_becomes_ready_is_stopped_after_the_startup_timeout_with_an_error_naming_it()
 {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let dir = folder_with_checkpoints("startup-learner-hangs");
     let policy = dir.join(CHECKPOINT).join("policy.safetensors");
     std::fs::remove_file(&policy).unwrap();

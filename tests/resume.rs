@@ -5,14 +5,15 @@
 //! graph-service checkpoint is refused and kept while the run resumes; a checkpoint of another
 //! config is refused before anything starts.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+use common::one_run_at_a_time;
 use serde_json::Value;
 
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 /// Upper bound for one smoke run on a loaded 2-core machine; past it the run is killed.
 const WATCHDOG: Duration = Duration::from_secs(600);
 /// Checkpoints only at clean stops (the interval is not part of the config fingerprint), so a
@@ -225,7 +226,7 @@ fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
 
 #[test]
 fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let dir = RunDir::new("process");
     train_ok(&dir, &["--set", "run.max_episodes=6"], "first launch");
     assert_eq!(
@@ -382,7 +383,7 @@ fn a_stopped_run_resumes_from_its_checkpoint_and_its_counters_continue() {
 
 #[test]
 fn a_run_killed_between_checkpoints_resumes_with_its_curves_cut_at_the_checkpoint() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let dir = RunDir::new("killed");
     // Checkpoints only at clean stops ([`NO_INTERVAL`]), so the killed launch leaves none of
     // its own.
@@ -495,7 +496,7 @@ fn files_of(folder: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
 
 #[test]
 fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_an_empty_store() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let dir = RunDir::new("corrupt-graph");
     // Checkpoints only at the clean stops ([`NO_INTERVAL`]): the first launch leaves exactly
     // one graph-service checkpoint, and the second cannot prune the damaged one with interval
@@ -557,7 +558,7 @@ fn a_corrupt_graph_service_checkpoint_is_refused_kept_and_the_run_resumes_with_a
 
 #[test]
 fn a_serial_run_resumes_too_with_its_graph_store_and_another_config_is_refused_before_starting() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let dir = RunDir::new("serial");
     train_ok(
         &dir,

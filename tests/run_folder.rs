@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
-use common::{serial_smoke_args, signal, spawn_asi, Run, WATCHDOG};
+use common::{one_run_at_a_time, serial_smoke_args, signal, spawn_asi, Run, WATCHDOG};
 
 /// Every file under `folder` but the lock file (which a refused launch rewrites with its pid)
 /// and `status/` (the killed run's), with its bytes.
@@ -61,6 +61,7 @@ fn launch(dir: &Path, extra: &[&str]) -> (bool, String) {
 
 #[test]
 fn a_running_folder_refuses_a_second_launch_and_a_run_killed_before_its_first_checkpoint_is_kept() {
+    let _slot = one_run_at_a_time();
     // No checkpoint for the first 1,000 minutes: the run is killed long before.
     let mut run = Run::start(
         "run-folder",

@@ -16,12 +16,7 @@
 
 mod common;
 
-use std::sync::Mutex;
-
 use common::*;
-
-/// One training run at a time on the two CI cores.
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn learner_starts(dir: &std::path::Path) -> usize {
     std::fs::read_to_string(dir.join("status").join("learner.starts.jsonl"))
@@ -32,7 +27,7 @@ fn learner_starts(dir: &std::path::Path) -> usize {
 
 #[test]
 fn sigterm_while_a_crashed_learner_waits_for_its_restart_stops_the_run_cleanly() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut run = Run::start(
         "signal-in-backoff",
         "configs/smoke.toml",
@@ -88,7 +83,7 @@ fn launcher_log_has(dir: &std::path::Path, text: &str) -> bool {
 
 #[test]
 fn sigterm_just_after_a_crashed_learner_was_restarted_still_reaches_it_as_a_stop_message() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut run = Run::start(
         "signal-after-restart",
         "configs/smoke.toml",
@@ -135,7 +130,7 @@ fn is_ready(dir: &std::path::Path, process: &str) -> bool {
 
 #[test]
 fn sigterm_while_the_launcher_waits_for_the_services_to_be_ready_stops_them_in_order() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut run = Run::start(
         "signal-while-starting",
         "configs/smoke.toml",

@@ -7,12 +7,9 @@
 mod common;
 
 use std::path::Path;
-use std::sync::Mutex;
 
 use common::*;
 use serde_json::Value;
-
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// `asi train` on the smoke config with two actors (see [`common::Run`]).
 fn start(test: &str, extra: &[&str]) -> Run {
@@ -81,7 +78,7 @@ fn assert_nothing_lost(run: &Run, actor_statuses: &[Value]) {
 
 #[test]
 fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     // Evaluations every 4 training episodes, 2 episodes each, so the evaluator runs too.
     let mut run = start(
         "complete",
@@ -155,7 +152,7 @@ fn a_smoke_run_moves_every_step_from_both_actors_to_learner_and_graph_service() 
 
 #[test]
 fn sigterm_stops_every_process_cleanly_and_leaves_no_shared_memory() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut run = start("sigterm", &["--set", "run.max_episodes=1000000"]);
     run.wait_until("both actors published data", |dir| {
         every_actor_published(dir, 2)
@@ -177,7 +174,7 @@ fn sigterm_stops_every_process_cleanly_and_leaves_no_shared_memory() {
 
 #[test]
 fn a_killed_actor_is_restarted_and_the_run_continues() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let mut run = start("kill-actor", &["--set", "run.max_episodes=1000000"]);
     run.wait_until("the learner ingested data", |dir| {
         learner_steps_in_metrics(dir) > 0
@@ -215,7 +212,7 @@ fn a_killed_actor_is_restarted_and_the_run_continues() {
 
 #[test]
 fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
-    let _lock = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _lock = one_run_at_a_time();
     let eval = [
         "--set",
         "eval.interval_episodes=2",
@@ -278,4 +275,43 @@ fn png_size(path: &std::path::Path) -> (u32, u32) {
     let info = reader.next_frame(&mut pixels).expect("PNG pixels decode");
     assert!(pixels.iter().any(|&b| b != 255), "the picture is not blank");
     (info.width, info.height)
+}
+
+/// The run slot that keeps these runs off each other's cores holds against a second holder in
+/// this process and in another process (Python's `fcntl.flock`, the same `flock(2)` lock), as
+/// when nextest runs each test in a process of its own, and is free again once dropped. (On a
+/// lock file of its own: the shared one may be taken by another test the moment it is free.)
+#[test]
+fn the_run_slot_is_exclusive_across_processes_until_its_holder_drops_it() {
+    use std::fs::{OpenOptions, TryLockError};
+    let path = fresh_dir("run-slot");
+    let other_process_can_lock = || {
+        let script = "import fcntl, sys\nf = open(sys.argv[1], 'a')\ntry:\n    \
+                      fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)\nexcept BlockingIOError:\n    \
+                      sys.exit(3)\n";
+        let status = std::process::Command::new("python3")
+            .args(["-c", script])
+            .arg(&path)
+            .status()
+            .expect("python3 runs");
+        match status.code() {
+            Some(0) => true,
+            Some(3) => false,
+            other => panic!("the lock probe failed: {other:?}"),
+        }
+    };
+    let slot = RunSlot::take(&path);
+    let second = OpenOptions::new().write(true).open(&path).unwrap();
+    assert!(matches!(second.try_lock(), Err(TryLockError::WouldBlock)));
+    assert!(
+        !other_process_can_lock(),
+        "another process took the held slot"
+    );
+    drop(slot);
+    assert!(other_process_can_lock(), "the dropped slot stays locked");
+    second
+        .try_lock()
+        .expect("the dropped slot is free in this process");
+    drop(second);
+    std::fs::remove_file(&path).unwrap();
 }

@@ -15,6 +15,38 @@ use serde_json::Value;
 /// Upper bound for one smoke run on a loaded 2-core machine; past it the run is killed.
 pub const WATCHDOG: Duration = Duration::from_secs(600);
 
+/// The right to run one training run of several processes: held by every test that starts one,
+/// while its run is alive, so these runs, whose checks wait on processes that share the two CI
+/// cores, never run beside each other. (Serial runs are one process, bit-exact whatever the load,
+/// and do not take it.) An exclusive lock on one file in cargo's test scratch folder: it serialises the
+/// tests of one binary (each `open` is its own lock holder, even within one process) and of every
+/// binary at once, so it also holds when a runner such as nextest starts tests in parallel
+/// processes. The operating system drops the lock when the holder exits, even by a panic or a
+/// kill, so a failed test never blocks the next.
+pub struct RunSlot {
+    _file: std::fs::File,
+}
+
+/// Waits for the [`RunSlot`] (a lock on one file in cargo's test scratch folder) and takes it.
+pub fn one_run_at_a_time() -> RunSlot {
+    RunSlot::take(&Path::new(env!("CARGO_TARGET_TMPDIR")).join("asi-one-run-at-a-time.lock"))
+}
+
+impl RunSlot {
+    /// Waits for the exclusive lock on `path` (created if missing) and takes it.
+    pub fn take(path: &Path) -> RunSlot {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(path)
+            .unwrap_or_else(|e| panic!("cannot open the run lock {}: {e}", path.display()));
+        file.lock()
+            .unwrap_or_else(|e| panic!("cannot lock {}: {e}", path.display()));
+        RunSlot { _file: file }
+    }
+}
+
 /// A running `asi train` in a fresh folder; dropping it kills what is left and removes the
 /// folder.
 pub struct Run {
