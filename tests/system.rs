@@ -264,19 +264,6 @@ fn two_serial_runs_with_the_same_seed_write_identical_metrics() {
     assert_ne!(a, c, "another seed gives another run");
 }
 
-/// Width and height of the PNG at `path`, after decoding every pixel; panics unless it decodes
-/// and has a non-white pixel.
-fn png_size(path: &std::path::Path) -> (u32, u32) {
-    let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
-        .read_info()
-        .expect("a PNG header");
-    let mut pixels = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut pixels).expect("PNG pixels decode");
-    assert!(pixels.iter().any(|&b| b != 255), "the picture is not blank");
-    (info.width, info.height)
-}
-
 /// The run slot that keeps these runs off each other's cores holds against a second holder in
 /// this process and in another process (Python's `fcntl.flock`, the same `flock(2)` lock), as
 /// when nextest runs each test in a process of its own, and is free again once dropped. (On a

@@ -402,3 +402,16 @@ pub fn iceoryx2_files_with(ids: &std::collections::BTreeSet<String>) -> Vec<Stri
     }
     found
 }
+
+/// Width and height of the PNG at `path`, after decoding every pixel; panics unless it decodes
+/// and has a non-white pixel.
+pub fn png_size(path: &Path) -> (u32, u32) {
+    let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .expect("a PNG header");
+    let mut pixels = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut pixels).expect("PNG pixels decode");
+    assert!(pixels.iter().any(|&b| b != 255), "the picture is not blank");
+    (info.width, info.height)
+}
