@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::one_run_at_a_time;
+use common::{as_u64, fresh_dir, one_run_at_a_time, pids, read_json, signal};
 use serde_json::Value;
 
 /// Upper bound for one smoke run on a loaded 2-core machine; past it the run is killed.
@@ -26,20 +26,11 @@ struct RunDir(PathBuf);
 
 impl RunDir {
     fn new(test: &str) -> RunDir {
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos();
-        RunDir(
-            std::env::temp_dir().join(format!("asi-resume-{test}-{}-{nanos}", std::process::id())),
-        )
+        RunDir(fresh_dir(&format!("resume-{test}")))
     }
 
     fn status(&self, process: &str) -> Value {
-        let path = self.0.join("status").join(format!("{process}.json"));
-        let text =
-            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        serde_json::from_str(&text).unwrap()
+        read_json(&self.0.join("status").join(format!("{process}.json")))
     }
 
     fn checkpoints(&self) -> Vec<String> {
@@ -122,20 +113,8 @@ fn wait_with_watchdog(mut child: Child, dir: &Path) -> Output {
 
 /// SIGKILLs every process of the run that wrote a pid file.
 fn kill_children(dir: &Path) {
-    let pids = std::fs::read_dir(dir.join("status"))
-        .map(|d| d.flatten().collect::<Vec<_>>())
-        .unwrap_or_default();
-    for entry in pids {
-        if entry.file_name().to_string_lossy().ends_with(".pid") {
-            if let Ok(pid) = std::fs::read_to_string(entry.path())
-                .unwrap_or_default()
-                .trim()
-                .parse::<i32>()
-            {
-                // SAFETY: plain syscall on a pid of this run.
-                unsafe { libc::kill(pid, libc::SIGKILL) };
-            }
-        }
+    for pid in pids(dir) {
+        signal(pid, libc::SIGKILL);
     }
 }
 
@@ -148,12 +127,6 @@ fn names_in(folder: &Path) -> Vec<String> {
         .collect();
     names.sort();
     names
-}
-
-fn as_u64(v: &Value, key: &str) -> u64 {
-    v.get(key)
-        .and_then(Value::as_u64)
-        .unwrap_or_else(|| panic!("`{key}` missing in {v}"))
 }
 
 /// `learner/ingest/env_steps` of every metrics line, in file order.

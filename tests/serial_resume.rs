@@ -56,14 +56,7 @@ struct TempDir(PathBuf);
 
 impl TempDir {
     fn new(test: &str) -> TempDir {
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos();
-        let dir = std::env::temp_dir().join(format!(
-            "asi-serial-resume-{test}-{}-{nanos}",
-            std::process::id()
-        ));
+        let dir = common::fresh_dir(&format!("serial-resume-{test}"));
         std::fs::create_dir_all(&dir).unwrap();
         TempDir(dir)
     }
