@@ -17,12 +17,12 @@ pub const WATCHDOG: Duration = Duration::from_secs(600);
 
 /// The right to run one training run of several processes: held by every test that starts one,
 /// while its run is alive, so these runs, whose checks wait on processes that share the two CI
-/// cores, never run beside each other. (Serial runs are one process, bit-exact whatever the load,
-/// and do not take it.) An exclusive lock on one file in cargo's test scratch folder: it serialises the
-/// tests of one binary (each `open` is its own lock holder, even within one process) and of every
-/// binary at once, so it also holds when a runner such as nextest starts tests in parallel
-/// processes. The operating system drops the lock when the holder exits, even by a panic or a
-/// kill, so a failed test never blocks the next.
+/// cores, never run beside each other. (Serial runs are one process, bit-exact whatever the
+/// load, and do not take it.) An exclusive lock on one file in cargo's test scratch folder: it
+/// serialises the tests of one binary (each `open` is its own lock holder, even within one
+/// process) and of every binary at once, so it also holds when a runner such as nextest starts
+/// tests in parallel processes. The operating system drops the lock when the holder exits, even
+/// by a panic or a kill, so a failed test never blocks the next.
 pub struct RunSlot {
     _file: std::fs::File,
 }
