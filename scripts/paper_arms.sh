@@ -8,6 +8,11 @@
 #   asi-no-fr  --set asi.frontier_reaching=false
 #   asi-no-si  --set asi.self_imitation=false
 #   hess       both off
+#   asi-null   ASI with SI's weight asi.si_alpha times 1.01 (the config's, 0.01 where it sets
+#              none), forked from asi at SI_START (α acts on nothing before SI starts): a
+#              null fork, from which no effect is expected. How far it ends from asi is how
+#              far one seed's run can move by chance, the yardstick for the gaps between the
+#              arms (docs/RESULTS.md, null forks). Not in the default ARMS.
 # FR cannot change anything before asi.fr_start_episode (the actor draws nothing for FR while
 # its probability is 0) and SI nothing before asi.si_start_episode, and a serial run stopped
 # at an episode count resumes bit-exactly, also with other switches (tests/serial_resume.rs,
@@ -29,9 +34,9 @@
 # after the stages running beside it end. Re-running resumes every
 # unfinished stage; a stage killed before its first checkpoint starts over (`--restart`: its
 # folder is moved aside to <dir>.old-<secs>, nothing is deleted). The asi and asi-no-fr arms
-# go on in their branch's folder, so an arm forked from a branch (asi-no-si from asi, hess from
-# asi-no-fr) must be asked for before that branch runs on: once it has, the script stops with
-# a message instead of copying the wrong episode.
+# go on in their branch's folder, so an arm forked from a branch (asi-no-si and asi-null from
+# asi, hess from asi-no-fr) must be asked for before that branch runs on: once it has, the
+# script stops with a message instead of copying the wrong episode.
 # Curves: asi plot OUT_DIR/asi_s* OUT_DIR/hess_s* ... (the _sN suffix is the seed tag).
 set -euo pipefail
 
@@ -53,6 +58,17 @@ import sys
 text = open(sys.argv[1]).read()
 found = re.search(rf"^\s*{sys.argv[2]}\s*=\s*([0-9]+)\s*(#.*)?$", text, re.MULTILINE)
 print(found.group(1) if found else sys.argv[3])
+EOF
+}
+# The null fork's SI weight: the config's asi.si_alpha (the binary's default 0.01 where it sets
+# none) times 1.01.
+null_alpha() {
+    python3 - "$config" <<'EOF'
+import re
+import sys
+text = open(sys.argv[1]).read()
+found = re.search(r"^\s*si_alpha\s*=\s*([0-9.eE+-]+)\s*(#.*)?$", text, re.MULTILINE)
+print(repr(round(float(found.group(1) if found else 0.01) * 1.01, 12)))
 EOF
 }
 config_fr=$(config_value fr_start_episode 200)
@@ -77,8 +93,9 @@ if (( episodes <= si_start || si_start <= fr_start )); then
 fi
 for arm in "${arms[@]}"; do
     case $arm in
-        asi | asi-no-fr | asi-no-si | hess) ;;
-        *) echo "unknown arm '$arm' in ARMS (asi, asi-no-fr, asi-no-si, hess)" >&2; exit 2 ;;
+        asi | asi-no-fr | asi-no-si | hess | asi-null) ;;
+        *) echo "unknown arm '$arm' in ARMS (asi, asi-no-fr, asi-no-si, hess, asi-null)" >&2
+           exit 2 ;;
     esac
 done
 if [[ ! -x $bin ]]; then
@@ -92,6 +109,7 @@ declare -A flags=(
     [asi-no-fr]="--set asi.frontier_reaching=false"
     [asi-no-si]="--set asi.self_imitation=false"
     [hess]="--set asi.frontier_reaching=false --set asi.self_imitation=false"
+    [asi-null]="--set asi.si_alpha=$(null_alpha)"
 )
 
 # Episodes finished by the run in $1 (0 when it has not started).
@@ -184,6 +202,7 @@ run "$fr_off" asi-no-fr "$si_start" &
 wait_all "$on" $!
 
 if [[ " ${arms[*]} " == *" asi-no-si "* ]]; then fork "$fr_on" "$out/asi-no-si_s$seed" "$si_start"; fi
+if [[ " ${arms[*]} " == *" asi-null "* ]]; then fork "$fr_on" "$out/asi-null_s$seed" "$si_start"; fi
 if [[ " ${arms[*]} " == *" hess "* ]]; then fork "$fr_off" "$out/hess_s$seed" "$si_start"; fi
 # The arms to EPISODES, JOBS at a time.
 pids=()

@@ -10,6 +10,7 @@ computed by hand in the comments.
 import json
 import math
 import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -529,7 +530,8 @@ class CountChoice(unittest.TestCase):
 
 # Stand-in for `asi train --serial` as paper_arms.sh calls it (ASI_BIN): resumes at the run
 # folder's last episode and writes one metrics line per episode up to run.max_episodes with the
-# two switches it ran under, so a test can read which switches each episode of an arm had.
+# two switches (and SI's weight, where set) it ran under, so a test can read which switches each
+# episode of an arm had.
 FAKE_ASI = r"""#!/usr/bin/env python3
 import json, os, sys
 args = sys.argv[1:]
@@ -549,7 +551,8 @@ until = int(sets["run.max_episodes"])
 until = min(until, int(os.environ.get("FAKE_STOP_AT", until)))
 with open(path, "a") as out:
     for episode in range(done + 1, until + 1):
-        out.write(json.dumps({"learner/schedule/train_episodes": episode, "fr": fr, "si": si}) + "\n")
+        out.write(json.dumps({"learner/schedule/train_episodes": episode, "fr": fr, "si": si,
+                              "alpha": sets.get("asi.si_alpha")}) + "\n")
 """
 
 
@@ -602,6 +605,40 @@ class PaperArms(unittest.TestCase):
         self.assertEqual(self.switches("asi-no-fr"), [(1, 40, False, True)])
         self.assertEqual(self.switches("asi-no-si"), [trunk, (21, 30, True, True), (31, 40, True, False)])
         self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
+
+    def alphas(self, arm):
+        """(first episode, last episode, asi.si_alpha given) runs in the arm's metrics."""
+        runs = []
+        with open(os.path.join(self.out, f"{arm}_s0", "metrics.jsonl")) as lines:
+            for line in lines:
+                m = json.loads(line)
+                episode = m["learner/schedule/train_episodes"]
+                if runs and runs[-1][2] == m["alpha"]:
+                    runs[-1] = (runs[-1][0], episode, m["alpha"])
+                else:
+                    runs.append((episode, episode, m["alpha"]))
+        return runs
+
+    def test_the_null_fork_is_asi_with_alpha_times_1_01_from_si_start(self):
+        done = self.arms("asi asi-null")
+        self.assertEqual(done.returncode, 0, done.stderr)
+        # ASI's prefix to SI_START (30), then the default α (0.01) times 1.01.
+        self.assertEqual(self.switches("asi-null"), [(1, 20, False, True), (21, 40, True, True)])
+        self.assertEqual(self.alphas("asi-null"), [(1, 30, None), (31, 40, "0.0101")])
+        self.assertEqual(self.alphas("asi"), [(1, 40, None)])
+        # A config's own α is the one scaled.
+        shutil.rmtree(self.out)
+        with open(self.config, "a") as f:
+            f.write("si_alpha = 0.02  # SI's weight\n")
+        self.assertEqual(self.arms("asi-null").returncode, 0)
+        self.assertEqual(self.alphas("asi-null"), [(1, 30, None), (31, 40, "0.0202")])
+        # Like asi-no-si it is forked from asi at 30, so not once asi has run on.
+        late = self.arms("asi asi-null")
+        self.assertEqual(late.returncode, 0, late.stderr)
+        shutil.rmtree(os.path.join(self.out, "asi-null_s0"))
+        late = self.arms("asi-null")
+        self.assertNotEqual(late.returncode, 0)
+        self.assertIn("cannot fork asi-null_s0 from asi_s0", " ".join(late.stderr.split()))
 
     def test_an_arm_is_not_forked_from_a_branch_that_ran_on(self):
         done = self.arms("asi")
