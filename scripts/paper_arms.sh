@@ -67,8 +67,12 @@ null_alpha() {
 import re
 import sys
 text = open(sys.argv[1]).read()
-found = re.search(r"^\s*si_alpha\s*=\s*([0-9.eE+-]+)\s*(#.*)?$", text, re.MULTILINE)
-print(repr(round(float(found.group(1) if found else 0.01) * 1.01, 12)))
+found = re.search(r"^\s*si_alpha\s*=\s*([^#\s]+)\s*(#.*)?$", text, re.MULTILINE)
+try:
+    alpha = float(found.group(1)) if found else 0.01
+except ValueError:
+    sys.exit(f"{sys.argv[1]}: si_alpha = {found.group(1)} is not a number")
+print(repr(round(alpha * 1.01, 12)))
 EOF
 }
 config_fr=$(config_value fr_start_episode 200)
@@ -98,6 +102,12 @@ for arm in "${arms[@]}"; do
            exit 2 ;;
     esac
 done
+# The null fork's α, read (and checked) before anything runs.
+null_flags=""
+if [[ " ${arms[*]} " == *" asi-null "* ]]; then
+    alpha=$(null_alpha) || exit 2
+    null_flags="--set asi.si_alpha=$alpha"
+fi
 if [[ ! -x $bin ]]; then
     cargo build --release
 fi
@@ -109,7 +119,7 @@ declare -A flags=(
     [asi-no-fr]="--set asi.frontier_reaching=false"
     [asi-no-si]="--set asi.self_imitation=false"
     [hess]="--set asi.frontier_reaching=false --set asi.self_imitation=false"
-    [asi-null]="--set asi.si_alpha=$(null_alpha)"
+    [asi-null]=$null_flags
 )
 
 # Episodes finished by the run in $1 (0 when it has not started).

@@ -633,12 +633,22 @@ class PaperArms(unittest.TestCase):
         self.assertEqual(self.arms("asi-null").returncode, 0)
         self.assertEqual(self.alphas("asi-null"), [(1, 30, None), (31, 40, "0.0202")])
         # Like asi-no-si it is forked from asi at 30, so not once asi has run on.
-        late = self.arms("asi asi-null")
-        self.assertEqual(late.returncode, 0, late.stderr)
+        on = self.arms("asi asi-null")
+        self.assertEqual(on.returncode, 0, on.stderr)
         shutil.rmtree(os.path.join(self.out, "asi-null_s0"))
         late = self.arms("asi-null")
         self.assertNotEqual(late.returncode, 0)
         self.assertIn("cannot fork asi-null_s0 from asi_s0", " ".join(late.stderr.split()))
+
+    def test_a_null_fork_needs_a_readable_alpha(self):
+        with open(self.config, "a") as f:
+            f.write("si_alpha = 1.2.3\n")
+        done = self.arms("asi asi-null")
+        self.assertEqual(done.returncode, 2)
+        self.assertIn("si_alpha = 1.2.3 is not a number", done.stderr)
+        self.assertFalse(os.path.exists(self.out), "nothing ran")
+        # The other arms do not read it.
+        self.assertEqual(self.arms("asi").returncode, 0)
 
     def test_an_arm_is_not_forked_from_a_branch_that_ran_on(self):
         done = self.arms("asi")
