@@ -49,34 +49,27 @@ if [[ ! -f $config ]]; then
     echo "no config file '$config'" >&2
     exit 2
 fi
-# config_value KEY DEFAULT: the integer the config gives KEY (these keys exist only in [asi]),
-# or DEFAULT (the binary's default) when it does not set it.
+# config_value KEY DEFAULT KIND [SCALE]: the value the config gives KEY (these keys exist only in
+# [asi]), or DEFAULT (the binary's default) where it sets none. KIND is int or float; a float is
+# printed times SCALE (1 if not given). A value that is not of its kind stops the script with a
+# message naming the config, before anything runs.
 config_value() {
-    python3 - "$config" "$1" "$2" <<'EOF'
+    python3 - "$config" "$@" <<'EOF'
 import re
 import sys
-text = open(sys.argv[1]).read()
-found = re.search(rf"^\s*{sys.argv[2]}\s*=\s*([0-9]+)\s*(#.*)?$", text, re.MULTILINE)
-print(found.group(1) if found else sys.argv[3])
-EOF
-}
-# The null fork's SI weight: the config's asi.si_alpha (the binary's default 0.01 where it sets
-# none) times 1.01.
-null_alpha() {
-    python3 - "$config" <<'EOF'
-import re
-import sys
-text = open(sys.argv[1]).read()
-found = re.search(r"^\s*si_alpha\s*=\s*([^#\s]+)\s*(#.*)?$", text, re.MULTILINE)
+path, key, default, kind = sys.argv[1:5]
+scale = float(sys.argv[5]) if len(sys.argv) > 5 else 1.0
+found = re.search(rf"^\s*{key}\s*=\s*([^#\s]+)\s*(#.*)?$", open(path).read(), re.MULTILINE)
+raw = found.group(1) if found else default
 try:
-    alpha = float(found.group(1)) if found else 0.01
+    value = int(raw) if kind == "int" else float(raw)
 except ValueError:
-    sys.exit(f"{sys.argv[1]}: si_alpha = {found.group(1)} is not a number")
-print(repr(round(alpha * 1.01, 12)))
+    sys.exit(f"{path}: {key} = {raw} is not {'an integer' if kind == 'int' else 'a number'}")
+print(value if kind == "int" else repr(round(value * scale, 12)))
 EOF
 }
-config_fr=$(config_value fr_start_episode 200)
-config_si=$(config_value si_start_episode 300)
+config_fr=$(config_value fr_start_episode 200 int) || exit 2
+config_si=$(config_value si_start_episode 300 int) || exit 2
 fr_start=${FR_START:-$config_fr}
 si_start=${SI_START:-$config_si}
 if (( fr_start != config_fr || si_start != config_si )); then
@@ -102,10 +95,11 @@ for arm in "${arms[@]}"; do
            exit 2 ;;
     esac
 done
-# The null fork's α, read (and checked) before anything runs.
+# The null fork's α: the config's asi.si_alpha (the binary's 0.01 where it sets none) times 1.01,
+# read (and checked) before anything runs.
 null_flags=""
 if [[ " ${arms[*]} " == *" asi-null "* ]]; then
-    alpha=$(null_alpha) || exit 2
+    alpha=$(config_value si_alpha 0.01 float 1.01) || exit 2
     null_flags="--set asi.si_alpha=$alpha"
 fi
 if [[ ! -x $bin ]]; then

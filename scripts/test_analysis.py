@@ -694,6 +694,15 @@ class PaperArms(unittest.TestCase):
         # Given by hand and equal to the config's, they are accepted.
         self.assertEqual(self.arms("asi", FR_START="20", SI_START="30").returncode, 0)
 
+    def test_a_fork_point_that_is_not_an_integer_is_refused(self):
+        # Read as anything but an integer it would be taken for the binary's default (300).
+        with open(self.config, "w") as f:
+            f.write("[asi]\nfr_start_episode = 20\nsi_start_episode = 30.5  # half way\n")
+        done = self.arms("asi")
+        self.assertEqual(done.returncode, 2)
+        self.assertIn("si_start_episode = 30.5 is not an integer", done.stderr)
+        self.assertFalse(os.path.exists(self.out), "nothing ran")
+
 
 class Options(unittest.TestCase):
     VALUES = {"--decisions": (400, count_choice.positive), "--seed": (0, int)}
