@@ -158,6 +158,15 @@ fn open_events(
         .map_err(open_failed(name))
 }
 
+/// What travels in shared memory as a slice element or a fixed-size value: plain, printable
+/// data with no references. Every `Copy` type deriving `ZeroCopySend` is one.
+pub trait Plain: Debug + Copy + ZeroCopySend + 'static {}
+impl<T: Debug + Copy + ZeroCopySend + 'static> Plain for T {}
+
+/// A sample's user header; a freshly loaned sample starts from its default.
+pub trait UserHeader: Debug + Default + ZeroCopySend + 'static {}
+impl<T: Debug + Default + ZeroCopySend + 'static> UserHeader for T {}
+
 type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Ipc>;
 
 /// Gives a channel's publish–subscribe service the sizes of `shape`.
@@ -197,8 +206,8 @@ fn open_slice_services<T, H>(
     shape: &ChannelShape,
 ) -> Result<(PubSubService<[T], H>, EventService), TransportError>
 where
-    T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + Default + ZeroCopySend + 'static,
+    T: Plain,
+    H: UserHeader,
 {
     let builder = node
         .service_builder(&service_name(name)?)
@@ -218,7 +227,7 @@ fn open_value_services<T>(
     shape: &ChannelShape,
 ) -> Result<(PubSubService<T, ()>, EventService), TransportError>
 where
-    T: Debug + Copy + ZeroCopySend + 'static,
+    T: Plain,
 {
     let builder = node
         .service_builder(&service_name(name)?)
@@ -242,7 +251,7 @@ fn subscriber_ports<P, H>(
 ) -> Result<SubscriberPorts<P, H>, TransportError>
 where
     P: Debug + IceoryxSend + ?Sized + 'static,
-    H: Debug + Default + ZeroCopySend + 'static,
+    H: UserHeader,
 {
     let subscriber = data
         .subscriber_builder()
@@ -286,8 +295,8 @@ fn take_wakeups(
 /// Sending end of a channel: loans shared memory, writes header and slice, sends, notifies.
 pub struct SlicePublisher<T, H>
 where
-    T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + Default + ZeroCopySend + 'static,
+    T: Plain,
+    H: UserHeader,
 {
     name: String,
     max_slice_len: usize,
@@ -297,8 +306,8 @@ where
 
 impl<T, H> SlicePublisher<T, H>
 where
-    T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + Default + ZeroCopySend + 'static,
+    T: Plain,
+    H: UserHeader,
 {
     pub fn open(
         node: &Node<Ipc>,
@@ -358,8 +367,8 @@ where
 /// Receiving end of a channel; its listener can be attached to a [`WaitSet`].
 pub struct SliceSubscriber<T, H>
 where
-    T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + Default + ZeroCopySend + 'static,
+    T: Plain,
+    H: UserHeader,
 {
     name: String,
     subscriber: Subscriber<Ipc, [T], H>,
@@ -368,8 +377,8 @@ where
 
 impl<T, H> SliceSubscriber<T, H>
 where
-    T: Debug + Copy + ZeroCopySend + 'static,
-    H: Debug + Default + ZeroCopySend + 'static,
+    T: Plain,
+    H: UserHeader,
 {
     pub fn open(
         node: &Node<Ipc>,
@@ -418,13 +427,13 @@ where
 }
 
 /// Sending end of a fixed-size message channel (metrics, control, progress).
-pub struct ValuePublisher<T: Debug + Copy + ZeroCopySend + 'static> {
+pub struct ValuePublisher<T: Plain> {
     name: String,
     publisher: Publisher<Ipc, T, ()>,
     notifier: Notifier<Ipc>,
 }
 
-impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
+impl<T: Plain> ValuePublisher<T> {
     pub fn open(
         node: &Node<Ipc>,
         name: &str,
@@ -461,13 +470,13 @@ impl<T: Debug + Copy + ZeroCopySend + 'static> ValuePublisher<T> {
 }
 
 /// Receiving end of a fixed-size message channel.
-pub struct ValueSubscriber<T: Debug + Copy + ZeroCopySend + 'static> {
+pub struct ValueSubscriber<T: Plain> {
     name: String,
     subscriber: Subscriber<Ipc, T, ()>,
     listener: Listener<Ipc>,
 }
 
-impl<T: Debug + Copy + ZeroCopySend + 'static> ValueSubscriber<T> {
+impl<T: Plain> ValueSubscriber<T> {
     pub fn open(
         node: &Node<Ipc>,
         name: &str,
@@ -518,8 +527,8 @@ fn open_rpc_services<Q, R>(
     max_clients: usize,
 ) -> Result<(RpcService<Q, R>, EventService, EventService), TransportError>
 where
-    Q: Debug + Default + Copy + ZeroCopySend + 'static,
-    R: Debug + Default + Copy + ZeroCopySend + 'static,
+    Q: Plain + Default,
+    R: Plain + Default,
 {
     let rpc = node
         .service_builder(&service_name(name)?)
@@ -538,8 +547,8 @@ where
 /// The answering side of a request–response channel whose bodies are bytes (postcard).
 pub struct RpcServer<Q, R>
 where
-    Q: Debug + Default + Copy + ZeroCopySend + 'static,
-    R: Debug + Default + Copy + ZeroCopySend + 'static,
+    Q: Plain + Default,
+    R: Plain + Default,
 {
     name: String,
     server: iceoryx2::port::server::Server<Ipc, [u8], Q, [u8], R>,
@@ -549,8 +558,8 @@ where
 
 impl<Q, R> RpcServer<Q, R>
 where
-    Q: Debug + Default + Copy + ZeroCopySend + 'static,
-    R: Debug + Default + Copy + ZeroCopySend + 'static,
+    Q: Plain + Default,
+    R: Plain + Default,
 {
     pub fn open(
         node: &Node<Ipc>,
@@ -616,8 +625,8 @@ type Pending<Q, R> = iceoryx2::pending_response::PendingResponse<Ipc, [u8], Q, [
 /// The asking side of a request–response channel.
 pub struct RpcClient<Q, R>
 where
-    Q: Debug + Default + Copy + ZeroCopySend + 'static,
-    R: Debug + Default + Copy + ZeroCopySend + 'static,
+    Q: Plain + Default,
+    R: Plain + Default,
 {
     name: String,
     client: iceoryx2::port::client::Client<Ipc, [u8], Q, [u8], R>,
@@ -627,8 +636,8 @@ where
 
 impl<Q, R> RpcClient<Q, R>
 where
-    Q: Debug + Default + Copy + ZeroCopySend + 'static,
-    R: Debug + Default + Copy + ZeroCopySend + 'static,
+    Q: Plain + Default,
+    R: Plain + Default,
 {
     pub fn open(
         node: &Node<Ipc>,
