@@ -18,8 +18,11 @@ asi-no-fr, asi-no-si, hess) as a two-by-two design, FR on or off by SI on or off
 episode of `--at`, FR's effect with SI on and off, SI's with FR on and off, and their
 interaction (FR with SI − FR without SI), paired by seed over the seeds that have all four
 arms there, mean ± sd with the one-sample t statistic; then each seed's values at the last
-episode. Standard library only; a run that has not reached an episode shows
-`-` there. Under the tables, the notes of scripts/launch_history.py on the runs' launch
+episode. With `--pool ARM=OTHER[,OTHER...]` (repeatable) the runs of the OTHER arms count
+as more runs of ARM (e.g. `--pool asi=asi-null`: a null fork is another run of ASI): each
+seed's value at an episode is then the mean over that seed's runs, `-` until all of them have
+reached it, and every table reads the pooled arm. Standard library only; a run that has not
+reached an episode shows `-` there. Under the tables, the notes of scripts/launch_history.py on the runs' launch
 histories (resumes that were not bit-exact, several builds or CPUs), when there are any.
 """
 import argparse
@@ -73,6 +76,25 @@ def fill(values, lo, hi):
     return out
 
 
+def pool(arms, arm, others):
+    """Makes the runs of `others` more runs of `arm`: each seed's per-episode values become the
+    mean over its runs, at the episodes all of them have reached (by the rule of `at_or_after`)."""
+    runs = defaultdict(list)
+    for name in [arm, *others]:
+        for seed, values in arms[name].items():
+            runs[seed].append(values)
+    merged = {}
+    for seed, values in sorted(runs.items()):
+        lo = min(min(v, default=0) for v in values)
+        filled = [fill(v, lo, max(v, default=lo - 1)) for v in values]
+        shared = set.intersection(*(set(f) for f in filled))
+        merged[seed] = {e: statistics.mean(f[e] for f in filled) for e in sorted(shared)}
+    kept = [(name, merged if name == arm else seeds) for name, seeds in arms.items()
+            if name not in others]
+    arms.clear()
+    arms.update(kept)
+
+
 def mean_sd(xs):
     if not xs:
         return "-"
@@ -89,6 +111,8 @@ def main():
     parser.add_argument("--over", help="episode range FIRST-LAST for the whole-run figures")
     parser.add_argument("--factorial", action="store_true",
                         help="FR × SI table of the arms " + ", ".join(FACTORIAL_ARMS))
+    parser.add_argument("--pool", action="append", default=[], metavar="ARM=OTHER[,OTHER...]",
+                        help="count the runs of OTHER as more runs of ARM, averaged by seed")
     args = parser.parse_args()
     try:
         at = [int(e) for e in args.at.split(",")]
@@ -102,6 +126,16 @@ def main():
         match = re.fullmatch(r"(.*)_s(\d+)", name)
         arm, seed = (match.group(1), int(match.group(2))) if match else (name, 0)
         arms[arm][seed] = per_episode(f"{run}/metrics.jsonl", args.metric)
+    pooled = {}  # arm -> the arms pooled into it
+    for spec in args.pool:
+        arm, _, others = spec.partition("=")
+        others = [o for o in others.split(",") if o]
+        unknown = [a for a in [arm, *others] if a not in arms]
+        if not others or unknown:
+            parser.error(f"--pool {spec}: takes ARM=OTHER[,OTHER...] with arms among "
+                         f"{sorted(arms)}" + (f" (no run of {', '.join(unknown)})" if unknown else ""))
+        pool(arms, arm, others)
+        pooled[arm] = pooled.get(arm, []) + others
     if args.base and args.base not in arms:
         parser.error(f"--base {args.base}: no run of that arm among {sorted(arms)}")
     missing = [a for a in FACTORIAL_ARMS if a not in arms]
@@ -117,7 +151,8 @@ def main():
             got = [v for v in vals if v is not None]
             each = " / ".join("-" if v is None else f"{v:.3f}" for v in vals)
             cells.append(f"**{statistics.mean(got):.3f}** ({each})" if got else "-")
-        print(f"| {arm} (seeds {', '.join(map(str, sorted(seeds)))}) | " + " | ".join(cells) + " |")
+        also = f"; pooled with {', '.join(pooled[arm])}" if arm in pooled else ""
+        print(f"| {arm} (seeds {', '.join(map(str, sorted(seeds)))}{also}) | " + " | ".join(cells) + " |")
     if args.base:
         paired(arms, args.base, at, lo, hi)
     if args.factorial:

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Tests of the analysis scripts (fr_trace.py with --frontiers, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
-count_choice.py, launch_history.py, arm_table.py's notes and its FR × SI table) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
+count_choice.py, launch_history.py, arm_table.py's notes, its FR × SI table and its pooled arms) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
 
     python3 scripts/test_analysis.py
 
@@ -817,6 +817,50 @@ class LaunchHistory(unittest.TestCase):
         out = subprocess.run([sys.executable, script, "--at", "20", clean],
                              capture_output=True, text=True, check=True).stdout
         self.assertNotIn("launch histories", out)
+
+
+class Pool(unittest.TestCase):
+    """arm_table.py --pool asi=asi-null: a null fork is one more run of ASI, averaged by seed."""
+
+    # Coverage by episode. Seed 0: asi has 15, asi-null not, so at 15 the null fork's next
+    # value (0.40 at 20) is taken: (0.50 + 0.40) / 2 = 0.45. Seed 1's null fork stops at 10,
+    # so from 15 on the seed has no pooled value.
+    RUNS = {"asi_s0": {10: 0.20, 15: 0.50, 20: 0.60}, "asi-null_s0": {10: 0.30, 20: 0.40},
+            "asi_s1": {10: 0.30, 20: 0.50}, "asi-null_s1": {10: 0.10},
+            "asi-no-fr_s0": {10: 0.25, 20: 0.45}, "asi-no-fr_s1": {10: 0.20, 20: 0.50}}
+
+    def test_each_seed_is_the_mean_of_its_runs(self):
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "arm_table.py")
+        with tempfile.TemporaryDirectory() as tmp:
+            for name, values in self.RUNS.items():
+                os.makedirs(os.path.join(tmp, name))
+                with open(os.path.join(tmp, name, "metrics.jsonl"), "w") as out:
+                    for episode, coverage in values.items():
+                        out.write(json.dumps({"learner/schedule/train_episodes": episode,
+                                              "learner/charts/coverage": coverage}) + "\n")
+            runs = [os.path.join(tmp, name) for name in self.RUNS]
+
+            def table(*extra):
+                return subprocess.run([sys.executable, script, "--at", "10,15,20", "--base",
+                                       "asi-no-fr", *extra, *runs], capture_output=True, text=True)
+
+            done = table("--pool", "asi=asi-null")
+            self.assertEqual(done.returncode, 0, done.stderr)
+            self.assertIn("| asi (seeds 0, 1; pooled with asi-null) | **0.225** (0.250 / 0.200) | "
+                          "**0.450** (0.450 / -) | **0.500** (0.500 / -) |", done.stdout)
+            self.assertNotIn("| asi-null", done.stdout)
+            # Paired against ASI without FR: 0 and 0 at 10; seed 0 alone at 15 (0.45 − 0.45, its
+            # next value) and at 20 (0.50 − 0.45).
+            self.assertIn("| asi | +0.000 ± 0.000 | +0.000 ± 0.000 | +0.050 ± 0.000 |", done.stdout)
+            # Unpooled, the null fork is an arm of its own.
+            plain = table()
+            self.assertIn("| asi (seeds 0, 1) | **0.250** (0.200 / 0.300) |", plain.stdout)
+            self.assertIn("| asi-null (seeds 0, 1) | **0.200** (0.300 / 0.100) |", plain.stdout)
+            # An arm with no run is an error.
+            bad = table("--pool", "asi=hess")
+            self.assertEqual(bad.returncode, 2)
+            self.assertIn("--pool asi=hess", bad.stderr)
+            self.assertIn("no run of hess", bad.stderr)
 
 
 class Factorial(unittest.TestCase):
