@@ -582,6 +582,12 @@ class PaperArms(unittest.TestCase):
         return subprocess.run(["bash", script, self.config, "0", "40", self.out], env=env,
                               capture_output=True, text=True, timeout=120)
 
+    def assertRefused(self, done, message):
+        """The script stopped with exit 2 and MESSAGE before running anything."""
+        self.assertEqual(done.returncode, 2, done.stderr)
+        self.assertIn(message, " ".join(done.stderr.split()))
+        self.assertFalse(os.path.exists(self.out), "nothing ran")
+
     def switches(self, arm):
         """Runs of (first episode, last episode, FR on, SI on) in the arm's metrics."""
         runs = []
@@ -643,10 +649,7 @@ class PaperArms(unittest.TestCase):
     def test_a_null_fork_needs_a_readable_alpha(self):
         with open(self.config, "a") as f:
             f.write("si_alpha = 1.2.3\n")
-        done = self.arms("asi asi-null")
-        self.assertEqual(done.returncode, 2)
-        self.assertIn("si_alpha = 1.2.3 is not a number", done.stderr)
-        self.assertFalse(os.path.exists(self.out), "nothing ran")
+        self.assertRefused(self.arms("asi asi-null"), "si_alpha = 1.2.3 is not a number")
         # The other arms do not read it.
         self.assertEqual(self.arms("asi").returncode, 0)
 
@@ -686,11 +689,8 @@ class PaperArms(unittest.TestCase):
         self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
 
     def test_fork_points_other_than_the_configs_are_refused(self):
-        done = self.arms("asi", FR_START="20", SI_START="25")
-        self.assertEqual(done.returncode, 2)
-        self.assertIn("asi.fr_start_episode = 20 and asi.si_start_episode = 30",
-                      " ".join(done.stderr.split()))
-        self.assertFalse(os.path.exists(self.out), "nothing ran")
+        self.assertRefused(self.arms("asi", FR_START="20", SI_START="25"),
+                           "asi.fr_start_episode = 20 and asi.si_start_episode = 30")
         # Given by hand and equal to the config's, they are accepted.
         self.assertEqual(self.arms("asi", FR_START="20", SI_START="30").returncode, 0)
 
@@ -698,10 +698,7 @@ class PaperArms(unittest.TestCase):
         # Read as anything but an integer it would be taken for the binary's default (300).
         with open(self.config, "w") as f:
             f.write("[asi]\nfr_start_episode = 20\nsi_start_episode = 30.5  # half way\n")
-        done = self.arms("asi")
-        self.assertEqual(done.returncode, 2)
-        self.assertIn("si_start_episode = 30.5 is not an integer", done.stderr)
-        self.assertFalse(os.path.exists(self.out), "nothing ran")
+        self.assertRefused(self.arms("asi"), "si_start_episode = 30.5 is not an integer")
 
 
 class Options(unittest.TestCase):
