@@ -36,12 +36,14 @@ from collections import defaultdict
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import launch_history  # noqa: E402
+from run_archive import open_text  # noqa: E402
 
 
 def per_episode(path, metric):
-    """{training episode: metric value} from the first line that reached each episode."""
+    """{training episode: metric value} from the first line that reached each episode (of
+    metrics.jsonl, or of its packed form, scripts/run_archive.py)."""
     values = {}
-    with open(path) as lines:
+    with open_text(path) as lines:
         for line in lines:
             try:
                 record = json.loads(line)

@@ -45,6 +45,7 @@ import statistics
 import sys
 
 import maze_path
+from run_archive import open_text
 
 PREFIX = "actor0/actor/fr/"
 OUTCOMES = {0: "near frontier", 1: "stuck", 2: "new phi", 3: "still navigating"}
@@ -60,8 +61,9 @@ STRETCHES = [(201, 500), (501, 1000), (1001, 1500), (1501, 2000)]
 
 
 def records(path):
-    """The JSON objects of metrics.jsonl, skipping a line cut by a kill."""
-    with open(path) as lines:
+    """The JSON objects of metrics.jsonl (or of its packed form, scripts/run_archive.py),
+    skipping a line cut by a kill."""
+    with open_text(path) as lines:
         for line in lines:
             try:
                 yield json.loads(line)

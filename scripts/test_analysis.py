@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Tests of the analysis scripts (fr_trace.py with --frontiers, fr_outcomes.py (with --far-goals), store_reach.py, maze_path.py,
-count_choice.py, launch_history.py, arm_table.py's notes, its FR × SI table and its pooled arms) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
+count_choice.py, launch_history.py, arm_table.py's notes, its FR × SI table and its pooled arms, run_archive.py) on hand-built inputs, and of paper_arms.sh's forking with a stand-in for `asi train`.
 
     python3 scripts/test_analysis.py
 
@@ -24,6 +24,7 @@ import count_choice  # noqa: E402
 import fr_trace  # noqa: E402
 import launch_history  # noqa: E402
 import maze_path  # noqa: E402
+import run_archive  # noqa: E402
 import store_reach  # noqa: E402
 
 # The `maze` object of `asi tasks antmaze-u --json` (the entries the scripts read).
@@ -909,6 +910,110 @@ class Factorial(unittest.TestCase):
             done = self.table(*[r for r in runs if "hess" not in r])
             self.assertNotEqual(done.returncode, 0)
             self.assertIn("--factorial: no run of hess", done.stderr)
+
+
+class RunArchive(unittest.TestCase):
+    """run_archive.py pack / check, and the readers that take a packed folder for a run folder."""
+
+    # Actor 0's second episode (of three) was its FR episode.
+    LINES = [{"learner/schedule/train_episodes": e, "learner/charts/coverage": c, "actor0/actor/episodes": a,
+              "actor0/actor/fr/episodes": f} for e, c, a, f in ((10, 0.25, 1, 0), (20, 0.5, 2, 1), (30, 0.625, 3, 1))]
+    SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "run_archive.py")
+
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.addCleanup(self.tmp.cleanup)
+        self.runs = os.path.join(self.tmp.name, "runs")
+        self.out = os.path.join(self.tmp.name, "archive")
+
+    def run_dir(self, name, lines, extra=True, config=True):
+        path = os.path.join(self.runs, name)
+        os.makedirs(path)
+        with open(os.path.join(path, "metrics.jsonl"), "w") as out:
+            out.writelines(json.dumps(line) + "\n" for line in lines)
+        if config:
+            with open(os.path.join(path, "config.resolved.toml"), "w") as out:
+                out.write("seed = 0\n")
+        if extra:
+            for name in ("eval.jsonl", "launches.jsonl"):
+                with open(os.path.join(path, name), "w") as out:
+                    out.write('{"index": 1}\n')
+        return path
+
+    def call(self, *args):
+        return subprocess.run([sys.executable, self.SCRIPT, *args], capture_output=True, text=True)
+
+    def test_pack_keeps_what_the_readers_need_and_check_finds_the_first_difference(self):
+        asi = self.run_dir("asi_s0", self.LINES)
+        hess = self.run_dir("hess_s0", self.LINES[:2], extra=False)
+        done = self.call("pack", "--out", self.out, asi, hess)
+        self.assertEqual(done.returncode, 0, done.stderr)
+        self.assertIn("asi_s0: 3 lines, to episode 30", done.stdout)
+        packed = os.path.join(self.out, "asi_s0")
+        self.assertEqual(sorted(os.listdir(packed)), ["archive.json", "config.resolved.toml", "eval.jsonl",
+                                                      "launches.jsonl", "metrics.jsonl.gz"])
+        self.assertEqual(sorted(os.listdir(os.path.join(self.out, "hess_s0"))),
+                         ["archive.json", "config.resolved.toml", "metrics.jsonl.gz"])
+        with open(os.path.join(asi, "metrics.jsonl"), "rb") as handle:
+            original = handle.read()
+        import gzip
+        with gzip.open(os.path.join(packed, "metrics.jsonl.gz"), "rb") as handle:
+            self.assertEqual(handle.read(), original)
+        with open(os.path.join(packed, "archive.json")) as handle:
+            manifest = json.load(handle)
+        self.assertEqual(manifest["files"]["metrics.jsonl"]["lines"], 3)
+        self.assertEqual(manifest["files"]["metrics.jsonl"]["bytes"], len(original))
+        self.assertEqual(manifest["train_episodes"], 30)
+        # Packing again gives the same bytes (no time stamp in the gzip header).
+        with open(os.path.join(packed, "metrics.jsonl.gz"), "rb") as handle:
+            first = handle.read()
+        self.assertEqual(self.call("pack", "--out", self.out, asi).returncode, 0)
+        with open(os.path.join(packed, "metrics.jsonl.gz"), "rb") as handle:
+            self.assertEqual(handle.read(), first)
+        # The readers take the packed folder for the run folder.
+        self.assertEqual(list(fr_outcomes.records(os.path.join(packed, "metrics.jsonl"))), self.LINES)
+        self.assertEqual(store_reach.fr_episode_numbers(os.path.join(packed, "metrics.jsonl")), {2})
+        table = os.path.join(os.path.dirname(self.SCRIPT), "arm_table.py")
+        from_runs, from_archive = (
+            subprocess.run([sys.executable, table, "--at", "20,30", os.path.join(root, "asi_s0")],
+                           capture_output=True, text=True, check=True).stdout
+            for root in (self.runs, self.out))
+        self.assertIn("| asi (seeds 0) | **0.500** (0.500) | **0.625** (0.625) |", from_archive)
+        self.assertEqual(from_runs, from_archive)
+        # check: the same run, a rerun stopped early, a rerun that parts at line 2.
+        done = self.call("check", self.out, asi)
+        self.assertEqual((done.returncode, done.stdout), (0, "asi_s0: same (3 lines)\n"))
+        short = os.path.join(self.tmp.name, "rerun", "asi_s0")
+        os.makedirs(short)
+        with open(os.path.join(short, "metrics.jsonl"), "w") as out:
+            out.writelines(json.dumps(line) + "\n" for line in self.LINES[:2])
+        done = self.call("check", self.out, short)
+        self.assertEqual((done.returncode, done.stdout),
+                         (0, "asi_s0: same over the first 2 lines (the archive goes on)\n"))
+        parted = [dict(self.LINES[0]), dict(self.LINES[1], **{"learner/charts/coverage": 0.4375})]
+        with open(os.path.join(short, "metrics.jsonl"), "w") as out:
+            out.writelines(json.dumps(line) + "\n" for line in parted)
+        done = self.call("check", self.out, short, os.path.join(self.runs, "none_s0"))
+        self.assertEqual(done.returncode, 1)
+        self.assertEqual(done.stdout.splitlines(), ["asi_s0: line 2 differs: learner/charts/coverage",
+                                                    f"none_s0: not in {self.out}"])
+
+    def test_pack_refuses_what_is_not_a_run_and_writes_nothing(self):
+        good = self.run_dir("asi_s0", self.LINES)
+        bad = self.run_dir("hess_s0", self.LINES, config=False)
+        done = self.call("pack", "--out", self.out, good, bad)
+        self.assertNotEqual(done.returncode, 0)
+        self.assertIn("hess_s0: not a run folder (no config.resolved.toml)", done.stderr)
+        self.assertFalse(os.path.exists(self.out))
+        other = os.path.join(self.tmp.name, "other", "asi_s0")
+        shutil.copytree(good, other)
+        done = self.call("pack", "--out", self.out, good, other)
+        self.assertIn("two run folders are named asi_s0", done.stderr)
+        self.assertFalse(os.path.exists(self.out))
+        # A plain metrics.jsonl is read before a packed one beside it.
+        with open(os.path.join(good, "metrics.jsonl.gz"), "wb") as handle:
+            handle.write(b"not gzip")
+        self.assertEqual(len(list(fr_outcomes.records(os.path.join(good, "metrics.jsonl")))), 3)
 
 
 if __name__ == "__main__":

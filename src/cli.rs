@@ -183,7 +183,8 @@ pub struct ActorArgs {
 
 #[derive(Debug, Args)]
 pub struct PlotArgs {
-    /// Run directories (each with a metrics.jsonl). Seeds of one setting are recognised by a
+    /// Run directories (each with a metrics.jsonl, or a metrics.jsonl.gz where the folder was
+    /// packed by scripts/run_archive.py). Seeds of one setting are recognised by a
     /// trailing `_seed-N`, `-seedN` or `_sN` in the directory name and averaged; past the
     /// shortest seed's end the curve goes on dashed with the seeds that got further.
     #[arg(required = true, num_args = 1..)]

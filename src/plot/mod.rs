@@ -93,7 +93,22 @@ pub fn read_series(run_dir: &Path, x_key: &str, metric: &str) -> anyhow::Result<
     Ok(one.pop().expect("one series per metric"))
 }
 
-/// Reads each of `metrics` against `x_key` from `run_dir/metrics.jsonl`, in one streamed pass
+/// `run_dir/metrics.jsonl`, or when only that exists its packed form `metrics.jsonl.gz` (a run
+/// folder archived by scripts/run_archive.py), with the path opened.
+fn open_metrics(run_dir: &Path) -> anyhow::Result<(PathBuf, Box<dyn std::io::Read>)> {
+    let path = run_dir.join("metrics.jsonl");
+    let packed = run_dir.join("metrics.jsonl.gz");
+    if !path.exists() && packed.exists() {
+        let file = std::fs::File::open(&packed)
+            .with_context(|| format!("reading {}", packed.display()))?;
+        return Ok((packed, Box::new(flate2::read::MultiGzDecoder::new(file))));
+    }
+    let file = std::fs::File::open(&path).with_context(|| format!("reading {}", path.display()))?;
+    Ok((path, Box::new(file)))
+}
+
+/// Reads each of `metrics` against `x_key` from `run_dir/metrics.jsonl` (or its packed form,
+/// [`open_metrics`]), in one streamed pass
 /// that keeps only the wanted keys of each line (a week-long process-mode run writes hundreds
 /// of MB, and the launcher redraws its curves every minute). Points are kept in file order
 /// with x non-decreasing (a point whose x goes back is dropped) and the last value kept for
@@ -106,8 +121,7 @@ pub fn read_series_of(
     metrics: &[String],
 ) -> anyhow::Result<Vec<Series>> {
     use std::io::BufRead;
-    let path = run_dir.join("metrics.jsonl");
-    let file = std::fs::File::open(&path).with_context(|| format!("reading {}", path.display()))?;
+    let (path, file) = open_metrics(run_dir)?;
     let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
     let mut series = vec![
         Series {
@@ -878,6 +892,43 @@ mod tests {
         );
         assert!(got[2].x.is_empty());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_packed_run_folder_reads_as_its_plain_one() {
+        use std::io::Write;
+        let root = std::env::temp_dir().join(format!("asi-plot-packed-{}", std::process::id()));
+        let (plain, packed) = (root.join("plain"), root.join("packed"));
+        std::fs::create_dir_all(&plain).unwrap();
+        std::fs::create_dir_all(&packed).unwrap();
+        let text = "{\"x\": 1, \"y\": 0.5}\n{\"x\": 2, \"y\": 0.75}\n{\"x\": 3, \"y\": 0.25}\n";
+        std::fs::write(plain.join("metrics.jsonl"), text).unwrap();
+        // Two gzip members, as a file appended to after packing would have: both are read.
+        let (first, second) = text.split_at(text.find("{\"x\": 3").unwrap());
+        let mut gz = Vec::new();
+        for part in [first, second] {
+            let mut encoder =
+                flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+            encoder.write_all(part.as_bytes()).unwrap();
+            gz.extend(encoder.finish().unwrap());
+        }
+        std::fs::write(packed.join("metrics.jsonl.gz"), &gz).unwrap();
+        let want = read_series(&plain, "x", "y").unwrap();
+        assert_eq!(
+            (want.x.clone(), want.y.clone()),
+            (vec![1.0, 2.0, 3.0], vec![0.5, 0.75, 0.25])
+        );
+        assert_eq!(read_series(&packed, "x", "y").unwrap(), want);
+        // A plain metrics.jsonl beside a packed one is the one read (a run going on).
+        std::fs::write(packed.join("metrics.jsonl"), "{\"x\": 9, \"y\": 9}\n").unwrap();
+        let read = read_series(&packed, "x", "y").unwrap();
+        assert_eq!((read.x, read.y), (vec![9.0], vec![9.0]));
+        // A broken archive is an error naming it, not an empty curve.
+        std::fs::remove_file(packed.join("metrics.jsonl")).unwrap();
+        std::fs::write(packed.join("metrics.jsonl.gz"), &gz[..gz.len() / 2]).unwrap();
+        let err = read_series(&packed, "x", "y").unwrap_err();
+        assert!(format!("{err:#}").contains("metrics.jsonl.gz"), "{err:#}");
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]
