@@ -29,7 +29,12 @@
 # asi.fr_start_episode / asi.si_start_episode, 200 and 300 where it sets none; set by hand
 # they must equal them, or the script stops before running anything), JOBS (2)
 # arms run at once, NICE (19) their priority, CKPT_MINS (10) minutes between checkpoints
-# (run.checkpoint_interval_mins; they do not change the results). A stage stopped short of its
+# (run.checkpoint_interval_mins; they do not change the results). NICE orders the runs only
+# against processes of the same session: where Linux groups the CPU by session (autogroup, most
+# desktops and VMs; /proc/sys/kernel/sched_autogroup_enabled is 1), a build in another terminal
+# shares the CPU with this script's whole session half and half whatever NICE says. To make the
+# runs yield to it, lower the session that runs the script: `echo 19 > /proc/$$/autogroup` in
+# that shell before starting it (or `echo 19 > /proc/PID/autogroup` for a running asi). A stage stopped short of its
 # episode count (a signal: asi writes a checkpoint and exits) stops the script with a message,
 # after the stages running beside it end. Re-running resumes every
 # unfinished stage; a stage killed before its first checkpoint starts over (`--restart`: its
