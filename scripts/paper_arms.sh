@@ -29,7 +29,9 @@
 # asi.fr_start_episode / asi.si_start_episode, 200 and 300 where it sets none; set by hand
 # they must equal them, or the script stops before running anything), JOBS (2)
 # arms run at once, NICE (19) their priority, CKPT_MINS (10) minutes between checkpoints
-# (run.checkpoint_interval_mins; they do not change the results). NICE orders the runs only
+# (run.checkpoint_interval_mins; they do not change the results), ARCHIVE (unset) a folder to
+# pack the seed's run folders into once every arm is done (scripts/run_archive.py pack: the
+# trunk, both branches and the arms; e.g. ARCHIVE=results/antmaze-u-1000). NICE orders the runs only
 # against processes of the same session: where Linux groups the CPU by session (autogroup, most
 # desktops and VMs; /proc/sys/kernel/sched_autogroup_enabled is 1), a build in another terminal
 # shares the CPU with this script's whole session half and half whatever NICE says. To make the
@@ -224,3 +226,10 @@ for arm in "${arms[@]}"; do
 done
 wait_all "${pids[@]}"
 echo "$(date -u +%T) seed $seed: ${arms[*]} at $episodes episodes in $out"
+if [[ -n ${ARCHIVE:-} ]]; then
+    folders=("$trunk" "$fr_on" "$fr_off")
+    for arm in "${arms[@]}"; do
+        case $arm in asi | asi-no-fr) ;; *) folders+=("$out/${arm}_s$seed") ;; esac
+    done
+    python3 "$(dirname "$0")/run_archive.py" pack --out "$ARCHIVE" "${folders[@]}"
+fi

@@ -542,6 +542,8 @@ sets = dict(args[i + 1].split("=", 1) for i, a in enumerate(args) if a == "--set
 fr = sets.get("asi.frontier_reaching", "true") == "true"
 si = sets.get("asi.self_imitation", "true") == "true"
 os.makedirs(os.path.join(run_dir, "checkpoints", "serial"), exist_ok=True)
+with open(os.path.join(run_dir, "config.resolved.toml"), "w") as out:
+    out.write(open(args[args.index("--config") + 1]).read())
 path = os.path.join(run_dir, "metrics.jsonl")
 done = 0
 if os.path.exists(path):
@@ -612,6 +614,24 @@ class PaperArms(unittest.TestCase):
         self.assertEqual(self.switches("asi-no-fr"), [(1, 40, False, True)])
         self.assertEqual(self.switches("asi-no-si"), [trunk, (21, 30, True, True), (31, 40, True, False)])
         self.assertEqual(self.switches("hess"), [(1, 30, False, True), (31, 40, False, False)])
+
+    def test_archive_packs_the_seeds_folders_when_every_arm_is_done(self):
+        archive = os.path.join(self.dir.name, "archive")
+        done = self.arms("asi hess", ARCHIVE=archive)
+        self.assertEqual(done.returncode, 0, done.stderr)
+        self.assertEqual(sorted(os.listdir(archive)), ["asi-no-fr_s0", "asi_s0", "hess_s0", "trunk_s0"])
+        for name in os.listdir(archive):
+            with open(os.path.join(self.out, name, "metrics.jsonl")) as plain:
+                packed = list(fr_outcomes.records(os.path.join(archive, name, "metrics.jsonl")))
+                self.assertEqual(packed, [json.loads(line) for line in plain])
+            # The trunk stops at FR_START, the FR-off branch at SI_START, the arms at 40.
+            self.assertEqual(len(packed), {"trunk_s0": 20, "asi-no-fr_s0": 30}.get(name, 40), name)
+        # A seed stopped short packs nothing.
+        shutil.rmtree(self.out)
+        shutil.rmtree(archive)
+        done = self.arms("asi hess", ARCHIVE=archive, FAKE_STOP_AT="35")
+        self.assertNotEqual(done.returncode, 0)
+        self.assertFalse(os.path.exists(archive))
 
     def alphas(self, arm):
         """(first episode, last episode, asi.si_alpha given) runs in the arm's metrics."""
