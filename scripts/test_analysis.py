@@ -7,6 +7,7 @@ count_choice.py, launch_history.py, arm_table.py's notes, its FR × SI table and
 Standard library only; .ci/run runs it when python3 is installed. Every expected figure is
 computed by hand in the comments.
 """
+import gzip
 import json
 import math
 import os
@@ -976,7 +977,6 @@ class RunArchive(unittest.TestCase):
                          ["archive.json", "config.resolved.toml", "metrics.jsonl.gz"])
         with open(os.path.join(asi, "metrics.jsonl"), "rb") as handle:
             original = handle.read()
-        import gzip
         with gzip.open(os.path.join(packed, "metrics.jsonl.gz"), "rb") as handle:
             self.assertEqual(handle.read(), original)
         with open(os.path.join(packed, "archive.json")) as handle:
