@@ -74,7 +74,7 @@ impl MetricsBook {
             )?;
         }
         let tensorboard = EventWriter::create(&ctx.run_dir.join("tensorboard"))?;
-        Ok(Self {
+        let mut book = Self {
             values: BTreeMap::new(),
             started: Instant::now(),
             jsonl,
@@ -85,7 +85,28 @@ impl MetricsBook {
             rate: Rates::over(RATE_SPAN),
             run_dir: ctx.run_dir.clone(),
             last_plot: Instant::now(),
-        })
+        };
+        // A resumed launch stands at its checkpoint until the learner reports: its rates and
+        // progress line start there, not at 0 (which made the first rates the whole run's
+        // episodes over ten seconds).
+        if let Some(point) = ctx.resumed_from {
+            book.stand_at(point);
+        }
+        Ok(book)
+    }
+
+    /// The learner's counters at `point` (a checkpoint, or the start) until it reports.
+    fn stand_at(&mut self, point: crate::run::ResumePoint) {
+        self.values.insert(
+            "learner/ingest/env_steps".to_owned(),
+            point.env_steps as f64,
+        );
+        if let Some(episodes) = point.episodes {
+            self.values.insert(
+                "learner/ingest/episodes_completed".to_owned(),
+                episodes as f64,
+            );
+        }
     }
 
     /// Keeps the latest value per `<process>/<name>`; malformed samples are logged and skipped.
@@ -130,16 +151,7 @@ impl MetricsBook {
         }
         self.tensorboard.continue_at_end()?;
         self.forget_process("learner");
-        self.values.insert(
-            "learner/ingest/env_steps".to_owned(),
-            point.env_steps as f64,
-        );
-        if let Some(episodes) = point.episodes {
-            self.values.insert(
-                "learner/ingest/episodes_completed".to_owned(),
-                episodes as f64,
-            );
-        }
+        self.stand_at(point);
         self.rate = Rates::over(RATE_SPAN);
         self.progress.reset_rates();
         Ok(moved)
@@ -298,6 +310,47 @@ mod tests {
                 v["learner/ingest/env_steps"].as_f64().unwrap()
             })
             .collect()
+    }
+
+    #[test]
+    fn a_resumed_launch_stands_at_its_checkpoint_until_the_learner_reports() {
+        let dir = std::env::temp_dir().join(format!("asi-book-resume-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let point = ResumePoint {
+            sequence: Some(4),
+            env_steps: 1_750_000,
+            episodes: Some(3_500),
+        };
+        let ctx = RunContext {
+            config: Config::default(),
+            run_dir: dir.clone(),
+            run_id: protocol::RunId::new("t-2").unwrap(),
+            resume: true,
+            resumed_from: Some(point),
+            launch: None,
+            _lock: None,
+        };
+        let mut book = MetricsBook::create(&ctx, true).unwrap();
+        let figures = book.figures();
+        assert_eq!((figures.episodes, figures.env_steps), (3_500, 1_750_000));
+        // Another process reports first: the rate's first sample is the checkpoint's position.
+        book.record(&[
+            MetricsSample::new(ProcessRole::GraphService, 0, "graph/nodes", 1.0, 0, 0).unwrap(),
+        ]);
+        book.flush(0).unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+        book.record(&[
+            learner_sample("ingest/env_steps", 1_753_200.0),
+            learner_sample("ingest/episodes_completed", 3_506.0),
+        ]);
+        book.flush(0).unwrap();
+        let (episodes_per_sec, steps_per_sec) = book.rate.per_sec().unwrap();
+        // 3,200 steps in 6 episodes since the checkpoint (from 0 it would be 1,753,200 in 3,506).
+        assert!((steps_per_sec / episodes_per_sec - 3_200.0 / 6.0).abs() < 1e-6);
+        let jsonl = std::fs::read_to_string(dir.join("metrics.jsonl")).unwrap();
+        assert_eq!(steps_of_jsonl(&jsonl), [1_750_000.0, 1_753_200.0]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
