@@ -145,6 +145,20 @@ fn env_steps_in(path: &Path) -> Vec<u64> {
         .collect()
 }
 
+/// `learner/charts/coverage_free_cells_visited` of every metrics line that has it.
+fn coverage_cells_per_line(dir: &Path) -> Vec<u64> {
+    std::fs::read_to_string(dir.join("metrics.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter_map(|v| {
+            v.get("learner/charts/coverage_free_cells_visited")
+                .and_then(Value::as_f64)
+        })
+        .map(|c| c as u64)
+        .collect()
+}
+
 /// `graph-service/graph/stored_steps` of every line of a serial run's `metrics.jsonl`.
 fn stored_steps_per_line(dir: &Path) -> Vec<u64> {
     std::fs::read_to_string(dir.join("metrics.jsonl"))
@@ -166,6 +180,10 @@ fn stored_steps_per_line(dir: &Path) -> Vec<u64> {
 fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
     let (steps, updates) = (as_u64(before, "env_steps"), as_u64(before, "updates_low"));
     let lines_before = env_steps_per_line(&dir.0).len();
+    let cells_before = coverage_cells_per_line(&dir.0);
+    let covered = *cells_before
+        .last()
+        .expect("the first launch reported coverage");
     let budget = format!("run.max_episodes={}", as_u64(before, "episodes") + 6);
     let mut args = vec!["--set", budget.as_str()];
     args.extend_from_slice(extra);
@@ -193,6 +211,12 @@ fn resume_six_more(dir: &RunDir, before: &Value, extra: &[&str]) -> Value {
     assert!(
         lines[lines_before..].iter().all(|&s| s >= steps),
         "{lines:?}"
+    );
+    // Coverage goes on from the checkpoint's grid (saved beside it), not from 0.
+    let cells = coverage_cells_per_line(&dir.0);
+    assert!(
+        covered > 0 && cells[cells_before.len()..].iter().all(|&c| c >= covered),
+        "coverage cells before {cells_before:?}, after {cells:?}"
     );
     after
 }

@@ -1,6 +1,7 @@
 //! What every child process shares: its node, the stop conditions, metrics publishing, the
 //! task's dimensions, and the graph-service client (actors' questions, the learner's SI routes).
 
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use actor::{GraphTransport, ServiceOracle};
@@ -236,6 +237,52 @@ impl CoverageTracker {
         self.coverage.as_mut()
     }
 
+    /// Process mode: writes the grid beside the learner checkpoint at `checkpoint`
+    /// (`checkpoints/ckpt-N` → `checkpoints/coverage/ckpt-N.json`, atomically) and removes
+    /// the files of checkpoints no longer on disk. Nothing for tasks without a maze.
+    pub fn save_beside(&self, checkpoint: &Path) -> anyhow::Result<()> {
+        let Some(grid) = &self.coverage else {
+            return Ok(());
+        };
+        let path = coverage_file(checkpoint)?;
+        let dir = path.parent().context("a coverage file has a folder")?;
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let saved = serde_json::json!({"counts": grid.counts(), "n_outside": grid.n_outside()});
+        crate::run::write_atomically(&path, &saved.to_string())?;
+        let checkpoints = dir.parent().context("the coverage folder has a parent")?;
+        for entry in std::fs::read_dir(dir)?.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let gone = name
+                .strip_suffix(".json")
+                .is_some_and(|ckpt| !checkpoints.join(ckpt).exists());
+            if gone {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+        Ok(())
+    }
+
+    /// Process mode: restores the grid saved beside the learner checkpoint at `checkpoint`;
+    /// true when it did or the task has no maze. False, the grid left empty, when there is no
+    /// file (a checkpoint of a build before the grid was saved, or a stop between the two
+    /// writes); a file that does not parse or does not fit the grid is an error naming it.
+    pub fn restore_beside(&mut self, checkpoint: &Path) -> anyhow::Result<bool> {
+        let Some(grid) = self.coverage.as_mut() else {
+            return Ok(true);
+        };
+        let path = coverage_file(checkpoint)?;
+        let text = match std::fs::read_to_string(&path) {
+            Ok(text) => text,
+            Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+            Err(err) => return Err(err).with_context(|| format!("reading {}", path.display())),
+        };
+        let saved: SavedCoverage = serde_json::from_str(&text)
+            .with_context(|| format!("parsing the coverage grid {}", path.display()))?;
+        grid.restore_counts(&saved.counts, saved.n_outside)
+            .with_context(|| format!("restoring the coverage grid {}", path.display()))?;
+        Ok(true)
+    }
+
     /// `charts/coverage` and `charts/coverage_free_cells_visited`, if the task has a maze.
     pub fn metrics(&self) -> Vec<(String, f64)> {
         match &self.coverage {
@@ -250,6 +297,26 @@ impl CoverageTracker {
         }
     }
 }
+
+/// The coverage grid as [`CoverageTracker::save_beside`] writes it.
+#[derive(serde::Deserialize)]
+struct SavedCoverage {
+    counts: Vec<u64>,
+    n_outside: u64,
+}
+
+/// `checkpoints/coverage/ckpt-N.json` for the learner checkpoint `checkpoints/ckpt-N`.
+fn coverage_file(checkpoint: &Path) -> anyhow::Result<PathBuf> {
+    let (Some(dir), Some(name)) = (checkpoint.parent(), checkpoint.file_name()) else {
+        anyhow::bail!("{} is not a checkpoint folder", checkpoint.display());
+    };
+    let mut file = name.to_os_string();
+    file.push(".json");
+    Ok(dir.join(COVERAGE_DIR).join(file))
+}
+
+/// Folder beside the learner's checkpoints with the coverage grid of each (process mode).
+const COVERAGE_DIR: &str = "coverage";
 
 /// The graph-service over iceoryx2, with the configured timeout. After a call that got no
 /// answer (timeout, transport failure) the service counts as unreachable for one more timeout
@@ -365,6 +432,60 @@ impl<T: GraphTransport> RouteSource for GraphRoutes<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_coverage_grid_saved_beside_a_checkpoint_restores_and_stale_files_go() {
+        let dir = std::env::temp_dir().join(format!("asi-coverage-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let (old, kept) = (dir.join("ckpt-000001"), dir.join("ckpt-000002"));
+        std::fs::create_dir_all(&kept).unwrap();
+        std::fs::create_dir_all(dir.join(COVERAGE_DIR)).unwrap();
+        std::fs::write(coverage_file(&old).unwrap(), "{}").unwrap();
+        let config = Config::default();
+        let layout = task_info(&config).unwrap().layout;
+        let fresh = || CoverageTracker::new(&config, layout).unwrap();
+        let mut saved = fresh();
+        let grid = saved.grid_mut().expect("the default task has a maze");
+        for xy in [
+            [0.0, 0.0],
+            [0.1, 0.0],
+            [4.0, 0.0],
+            [8.0, 8.0],
+            [500.0, 500.0],
+        ] {
+            grid.visit(xy);
+        }
+        let visited = saved.metrics();
+        assert_eq!(visited[1].1, 3.0, "three free cells: {visited:?}");
+        saved.save_beside(&kept).unwrap();
+        assert_eq!(
+            std::fs::read_dir(dir.join(COVERAGE_DIR)).unwrap().count(),
+            1,
+            "only the kept checkpoint's grid is left"
+        );
+        assert!(coverage_file(&kept).unwrap().exists());
+
+        let mut restored = fresh();
+        assert!(restored.restore_beside(&kept).unwrap());
+        assert_eq!(restored.metrics(), visited);
+        let (a, b) = (saved.grid_mut().unwrap(), restored.grid_mut().unwrap());
+        assert_eq!((a.counts(), a.n_outside()), (b.counts(), b.n_outside()));
+        assert_eq!(b.n_outside(), 1);
+
+        // No file: false, nothing restored. A damaged one: an error naming it, nothing changed.
+        let mut empty = fresh();
+        assert!(!empty.restore_beside(&dir.join("ckpt-000003")).unwrap());
+        assert_eq!(empty.metrics()[1].1, 0.0);
+        std::fs::write(
+            coverage_file(&kept).unwrap(),
+            r#"{"counts": [1, 2], "n_outside": 0}"#,
+        )
+        .unwrap();
+        let err = empty.restore_beside(&kept).unwrap_err();
+        assert!(format!("{err:#}").contains("ckpt-000002.json"), "{err:#}");
+        assert_eq!(empty.metrics()[1].1, 0.0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     /// Set in the child process of [`a_sigterm_after_the_early_check_is_caught_not_fatal`].
     const CHILD_ENV: &str = "ASI_TEST_SIGNAL_CHILD";

@@ -13,6 +13,7 @@
 //! `status/learner.starts.jsonl` ([`STARTS_FILE`]: pid, env steps restored, versions), written
 //! once its trajectory subscriber exists.
 
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -48,6 +49,7 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let layout = task.layout;
     let mut coverage = CoverageTracker::new(config, layout)?;
     let mut learner = crate::run::open_learner(ctx, task.dims, task.episode_length)?;
+    restore_coverage(ctx, &mut coverage);
     continue_published_versions(ctx, &mut learner)?;
     let mut checkpoints = crate::run::CheckpointTimer::new(config);
     let node = node(ctx, "learner")?;
@@ -96,7 +98,11 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
                 &learner_metrics(&learner, &coverage),
             );
         }
-        checkpoints.tick(ctx, &learner);
+        if checkpoints.tick(ctx, &learner) {
+            if let Some(checkpoint) = newest_checkpoint(ctx) {
+                save_coverage(&coverage, &checkpoint);
+            }
+        }
     };
     // Actors are stopped first; whatever they sent is in our buffer: take it before leaving.
     ingest_all(&mut learner, &mut coverage, &trajectories);
@@ -105,8 +111,46 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
         &learner_metrics(&learner, &coverage),
     );
     tracing::info!(reason, "learner stopping");
-    crate::run::final_checkpoint(ctx, &mut learner)?;
+    if let Some(checkpoint) = crate::run::final_checkpoint(ctx, &mut learner)? {
+        save_coverage(&coverage, &checkpoint.path);
+    }
     write_final_status(ctx, &learner, reason)
+}
+
+/// The coverage grid of the learner checkpoint just restored (the newest in the run folder),
+/// so `charts/coverage` goes on from where the run was instead of from 0. A missing or
+/// unreadable grid is logged and coverage counts from this start's data only: a metric, not
+/// a reason to stop training.
+fn restore_coverage(ctx: &RunContext, coverage: &mut CoverageTracker) {
+    let Some(checkpoint) = newest_checkpoint(ctx) else {
+        return;
+    };
+    match coverage.restore_beside(&checkpoint) {
+        Ok(true) => {}
+        Ok(false) => tracing::warn!(
+            "no coverage grid beside {}: charts/coverage counts from this start's data only",
+            checkpoint.display()
+        ),
+        Err(err) => tracing::warn!("{err:#}: charts/coverage counts from this start's data only"),
+    }
+}
+
+/// The newest learner checkpoint in the run folder, if one can be found.
+fn newest_checkpoint(ctx: &RunContext) -> Option<PathBuf> {
+    learner::learner::checkpoint::latest_checkpoint(&ctx.checkpoint_dir())
+        .ok()
+        .flatten()
+}
+
+/// Writes the coverage grid beside the learner checkpoint at `checkpoint`; a failure is
+/// logged (the checkpoint stands; a resume from it counts coverage anew).
+fn save_coverage(coverage: &CoverageTracker, checkpoint: &Path) {
+    if let Err(err) = coverage.save_beside(checkpoint) {
+        tracing::error!(
+            "writing the coverage grid beside {} failed: {err:#}",
+            checkpoint.display()
+        );
+    }
 }
 
 /// The graph-service client for self-imitation routes; `None` when `asi.self_imitation` is off
