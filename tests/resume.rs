@@ -136,39 +136,33 @@ fn env_steps_per_line(dir: &Path) -> Vec<u64> {
 
 /// `learner/ingest/env_steps` of every line of the metrics file at `path`.
 fn env_steps_in(path: &Path) -> Vec<u64> {
-    std::fs::read_to_string(path)
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
-        .filter_map(|v| v.get("learner/ingest/env_steps").and_then(Value::as_f64))
-        .map(|s| s as u64)
-        .collect()
+    values_in(path, "learner/ingest/env_steps")
 }
 
 /// `learner/charts/coverage_free_cells_visited` of every metrics line that has it.
 fn coverage_cells_per_line(dir: &Path) -> Vec<u64> {
-    std::fs::read_to_string(dir.join("metrics.jsonl"))
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
-        .filter_map(|v| {
-            v.get("learner/charts/coverage_free_cells_visited")
-                .and_then(Value::as_f64)
-        })
-        .map(|c| c as u64)
-        .collect()
+    values_in(
+        &dir.join("metrics.jsonl"),
+        "learner/charts/coverage_free_cells_visited",
+    )
 }
 
 /// `graph-service/graph/stored_steps` of every line of a serial run's `metrics.jsonl`.
 fn stored_steps_per_line(dir: &Path) -> Vec<u64> {
-    std::fs::read_to_string(dir.join("metrics.jsonl"))
+    values_in(
+        &dir.join("metrics.jsonl"),
+        "graph-service/graph/stored_steps",
+    )
+}
+
+/// The (whole-number) value of `key` in every line of the metrics file at `path` that has it.
+fn values_in(path: &Path, key: &str) -> Vec<u64> {
+    std::fs::read_to_string(path)
         .unwrap_or_default()
         .lines()
         .filter_map(|l| serde_json::from_str::<Value>(l).ok())
-        .filter_map(|v| {
-            v.get("graph-service/graph/stored_steps")
-                .and_then(Value::as_u64)
-        })
+        .filter_map(|v| v.get(key).and_then(Value::as_f64))
+        .map(|x| x as u64)
         .collect()
 }
 
