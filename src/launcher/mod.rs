@@ -262,6 +262,12 @@ fn shutdown(
     if let Err(err) = control.send(ControlMessage::new(1, ControlCommand::Stop)) {
         tracing::warn!("could not send Stop: {err:#}");
     }
+    // A learner in a φ round finishes it first (50,000 steps: about a minute on two cores).
+    tracing::info!(
+        "stopping: the learner and graph-service write their final checkpoints (a running φ \
+         round is finished first; up to {} s)",
+        SERVICE_STOP_WAIT.as_secs()
+    );
     if !wait_for_services(control, children) {
         tracing::warn!("services did not stop on the Stop message; sending SIGTERM");
     }
