@@ -266,12 +266,12 @@ pub fn write_atomically(path: &Path, text: &str) -> anyhow::Result<()> {
 
 /// The run's learner: restored from the newest checkpoint in `checkpoints/` when there is one
 /// (an incompatible or damaged one is an error, never silently replaced), else a new one
-/// seeded with `run.seed`.
+/// seeded with `run.seed`; with the folder of the checkpoint it was restored from.
 pub fn open_learner(
     ctx: &RunContext,
     dims: TaskDims,
     episode_length: u32,
-) -> anyhow::Result<Learner> {
+) -> anyhow::Result<(Learner, Option<PathBuf>)> {
     let dir = ctx.checkpoint_dir();
     let start = Instant::now();
     let restored = Learner::restore_latest(&ctx.config, dims, &dir).with_context(|| {
@@ -291,11 +291,12 @@ pub fn open_learner(
                 "learner resumed from {}",
                 ckpt.path.display()
             );
-            Ok(learner)
+            Ok((learner, Some(ckpt.path)))
         }
         None => {
             Learner::with_episode_length(&ctx.config, dims, episode_length, ctx.config.run.seed)
                 .context("building the learner")
+                .map(|learner| (learner, None))
         }
     }
 }
@@ -322,21 +323,21 @@ impl CheckpointTimer {
     }
 
     /// Writes a checkpoint if one is due and no φ round runs; a failed write is logged and
-    /// retried at the next interval (training goes on). True when one was written.
-    pub fn tick(&mut self, ctx: &RunContext, learner: &Learner) -> bool {
+    /// retried at the next interval (training goes on). The checkpoint, when one was written.
+    pub fn tick(&mut self, ctx: &RunContext, learner: &Learner) -> Option<Checkpoint> {
         if !self.is_due() {
-            return false;
+            return None;
         }
         match save_checkpoint(ctx, learner) {
-            Ok(Some(_)) => {
+            Ok(Some(ckpt)) => {
                 self.last = Instant::now();
-                true
+                Some(ckpt)
             }
-            Ok(None) => false,
+            Ok(None) => None,
             Err(err) => {
                 tracing::error!("writing a checkpoint failed: {err:#}");
                 self.last = Instant::now();
-                false
+                None
             }
         }
     }

@@ -124,7 +124,7 @@ pub fn run(ctx: RunContext) -> anyhow::Result<bool> {
                 break;
             } else {
                 waiting_logged = false;
-                if checkpoints.tick(&serial.ctx, &serial.learner) {
+                if checkpoints.tick(&serial.ctx, &serial.learner).is_some() {
                     if let Err(err) = serial.save() {
                         tracing::error!("writing the serial checkpoint failed: {err:#}");
                     }
@@ -182,7 +182,7 @@ impl Serial {
             })?,
             false => None,
         };
-        let learner = crate::run::open_learner(&ctx, task.dims, task.episode_length)?;
+        let (learner, _) = crate::run::open_learner(&ctx, task.dims, task.episode_length)?;
         let base = saved
             .as_ref()
             .and_then(|s| s.manifest.graph_base.as_deref());

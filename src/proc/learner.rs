@@ -13,7 +13,7 @@
 //! `status/learner.starts.jsonl` ([`STARTS_FILE`]: pid, env steps restored, versions), written
 //! once its trajectory subscriber exists.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -48,8 +48,10 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     let task = task_info(config)?;
     let layout = task.layout;
     let mut coverage = CoverageTracker::new(config, layout)?;
-    let mut learner = crate::run::open_learner(ctx, task.dims, task.episode_length)?;
-    restore_coverage(ctx, &mut coverage);
+    let (mut learner, restored) = crate::run::open_learner(ctx, task.dims, task.episode_length)?;
+    if let Some(checkpoint) = restored {
+        restore_coverage(&mut coverage, &checkpoint);
+    }
     continue_published_versions(ctx, &mut learner)?;
     let mut checkpoints = crate::run::CheckpointTimer::new(config);
     let node = node(ctx, "learner")?;
@@ -98,10 +100,8 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
                 &learner_metrics(&learner, &coverage),
             );
         }
-        if checkpoints.tick(ctx, &learner) {
-            if let Some(checkpoint) = newest_checkpoint(ctx) {
-                save_coverage(&coverage, &checkpoint);
-            }
+        if let Some(checkpoint) = checkpoints.tick(ctx, &learner) {
+            save_coverage(&coverage, &checkpoint.path);
         }
     };
     // Actors are stopped first; whatever they sent is in our buffer: take it before leaving.
@@ -117,15 +117,11 @@ pub fn run(ctx: &RunContext) -> anyhow::Result<()> {
     write_final_status(ctx, &learner, reason)
 }
 
-/// The coverage grid of the learner checkpoint just restored (the newest in the run folder),
-/// so `charts/coverage` goes on from where the run was instead of from 0. A missing or
-/// unreadable grid is logged and coverage counts from this start's data only: a metric, not
-/// a reason to stop training.
-fn restore_coverage(ctx: &RunContext, coverage: &mut CoverageTracker) {
-    let Some(checkpoint) = newest_checkpoint(ctx) else {
-        return;
-    };
-    match coverage.restore_beside(&checkpoint) {
+/// The coverage grid of the learner checkpoint just restored from, so `charts/coverage` goes
+/// on from where the run was instead of from 0. A missing or unreadable grid is logged and
+/// coverage counts from this start's data only: a metric, not a reason to stop training.
+fn restore_coverage(coverage: &mut CoverageTracker, checkpoint: &Path) {
+    match coverage.restore_beside(checkpoint) {
         Ok(true) => {}
         Ok(false) => tracing::warn!(
             "no coverage grid beside {}: charts/coverage counts from this start's data only",
@@ -133,13 +129,6 @@ fn restore_coverage(ctx: &RunContext, coverage: &mut CoverageTracker) {
         ),
         Err(err) => tracing::warn!("{err:#}: charts/coverage counts from this start's data only"),
     }
-}
-
-/// The newest learner checkpoint in the run folder, if one can be found.
-fn newest_checkpoint(ctx: &RunContext) -> Option<PathBuf> {
-    learner::learner::checkpoint::latest_checkpoint(&ctx.checkpoint_dir())
-        .ok()
-        .flatten()
 }
 
 /// Writes the coverage grid beside the learner checkpoint at `checkpoint`; a failure is
