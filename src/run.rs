@@ -352,11 +352,9 @@ pub fn final_checkpoint(
     ctx: &RunContext,
     learner: &mut Learner,
 ) -> anyhow::Result<Option<Checkpoint>> {
-    while learner.phi_round_active() {
-        learner
-            .train(usize::MAX)
-            .context("finishing the φ round before the final checkpoint")?;
-    }
+    learner
+        .finish_phi_round()
+        .context("finishing the φ round before the final checkpoint")?;
     if let Some(sequence) = unchanged_since_newest(ctx, learner) {
         tracing::info!(
             checkpoint = sequence,

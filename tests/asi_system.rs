@@ -97,10 +97,16 @@ fn fr_episodes_and_si_steps_run_when_on_and_stay_at_zero_when_off() {
             "asi.frontier_reaching=false",
             "--set",
             "asi.self_imitation=false",
+            // φ rounds on a thread of their own here (orthogonal to FR and SI): they must end
+            // and be published as in line.
+            "--set",
+            "encoder.background_rounds=true",
         ],
     );
     off.wait_success();
     let m = off.last_metrics();
+    assert!(sum(&m, "learner/phi/rounds") >= 2.0, "{m:?}");
+    assert!(sum(&m, "learner/phi/version") >= 2.0, "{m:?}");
     assert_eq!(sum(&m, "fr/episodes"), 0.0, "{m:?}");
     assert_eq!(sum(&m, "ingest/frontier_steps"), 0.0, "{m:?}");
     assert_eq!(sum(&m, "fr/waypoint_decisions"), 0.0, "{m:?}");

@@ -99,6 +99,10 @@ pub enum LearnerError {
         /// The value.
         value: f64,
     },
+    /// The thread that runs φ rounds in the background (`encoder.background_rounds`) could
+    /// not start, panicked, or holds the trainer that was asked for.
+    #[error("φ round worker: {0}")]
+    PhiWorker(String),
     /// Building, running, saving or loading networks failed.
     #[error(transparent)]
     Nets(#[from] nets::NetsError),

@@ -24,14 +24,19 @@
 //! runs, so `updates_low` — and with it the actor throttle budget — does not grow: the actors
 //! stop within `replay.replay_slack_steps`, as the reference code collects nothing during a
 //! round, and what a round sees does not depend on actor speed (the φ store is frozen).
+//! With `encoder.background_rounds` (process mode) a round's steps run on a thread of their
+//! own instead ([`crate::phi::worker`]): the SAC updates, and so the actors, go on with the
+//! encoder as it was, and the round's result replaces it when [`Learner::train`] finds the
+//! round finished; the store is still frozen for the round, so what it sees is the same.
 //! Low-level rewards keep the φ labels computed at collection time (SPEC §6.1, digest §3.2:
 //! the code never relabels them): the low replay is not touched by a round.
 //!
 //! Self-imitation ([`crate::si`]): every training episode that ends after
 //! `asi.si_start_episode` makes one SI round due (counted at ingest); the binary runs due rounds
 //! with [`Learner::train_self_imitation`], handing it a [`RouteSource`] — the learner itself
-//! never talks to the graph-service. Rounds wait while a φ round runs, and ask for routes in the
-//! learner's current φ version.
+//! never talks to the graph-service. Rounds wait while a φ round runs in line (not while one
+//! runs in the background: the encoder does not change until it ends), and ask for routes in
+//! the learner's current φ version.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -50,7 +55,7 @@ use rand_pcg::Pcg64Mcg;
 use crate::deterministic::DeterministicStats;
 use crate::error::LearnerError;
 use crate::ingest::{Buffers, Episodes};
-use crate::phi::{PhiParams, PhiStats, PhiStore, PhiTrainer};
+use crate::phi::{PhiParams, PhiRunner, PhiStats, PhiStore, PhiTrainer};
 use crate::ratio::ReplayRatio;
 use crate::replay::{sample_into, BatchStage, HighReplay, LowReplay, LowRewardSpec};
 use crate::sac::{SacBatch, SacLevel, SacStats};
@@ -161,7 +166,7 @@ pub struct Learner {
     publish_interval_steps: u64,
     telemetry: Telemetry,
     phi_store: PhiStore,
-    phi: PhiTrainer,
+    phi: PhiRunner,
     schedule: ScheduleTracker,
     si: SelfImitation,
     fr_replay: FrReplay,
@@ -221,12 +226,19 @@ impl Learner {
             phi_params.negative_offset,
             usize::try_from(config.replay.capacity_steps).unwrap_or(usize::MAX),
         );
-        let phi = PhiTrainer::new(
+        let background = config.encoder.background_rounds;
+        let trainer = if background {
+            PhiTrainer::with_private_copy
+        } else {
+            PhiTrainer::new
+        };
+        let trainer = trainer(
             phi_params,
             &spec,
             &nets.policy_vm,
             seed.wrapping_add(PHI_SEED_OFFSET),
         )?;
+        let phi = PhiRunner::new(trainer, background);
         Ok(Learner {
             layout,
             low_stage: low_replay.stage(config.learner.low.batch_size),
@@ -364,18 +376,40 @@ impl Learner {
     }
 
     /// Runs the work due now and returns how much ran (0 = nothing to do): when a φ round is
-    /// due or running, one slice of it (at most `max_updates` and [`PHI_STEPS_PER_CALL`] Adam
-    /// steps, returned as their number; no SAC update runs meanwhile, see the module doc);
-    /// otherwise the SAC
-    /// updates that the replay ratio allows, at most `max_updates`, alternating low and high.
+    /// due or running in line, one slice of it (at most `max_updates` and
+    /// [`PHI_STEPS_PER_CALL`] Adam steps, returned as their number; no SAC update runs
+    /// meanwhile, see the module doc); otherwise the SAC updates that the replay ratio allows,
+    /// at most `max_updates`, alternating low and high. With rounds in the background, first
+    /// a finished round is collected (φ's version goes up) and a due one sent off, then the
+    /// SAC updates run.
     pub fn train(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
-        if self
-            .phi
-            .start_if_due(self.schedule.train_episodes(), &mut self.phi_store)?
-        {
+        let episodes = self.schedule.train_episodes();
+        if self.phi.is_background() {
+            if self.phi.collect(&mut self.phi_store, false)? {
+                self.phi_version = PhiVersion(self.phi_version.0 + 1);
+            }
+            self.phi.start_if_due(episodes, &mut self.phi_store)?;
+            return self.train_sac(max_updates);
+        }
+        if self.phi.start_if_due(episodes, &mut self.phi_store)? {
             return self.phi_slice(max_updates);
         }
         self.train_sac(max_updates)
+    }
+
+    /// Runs the φ round in progress, if any, to its end (in line), or waits for it and collects
+    /// it (background); no SAC update runs. Before a final checkpoint, which a round defers.
+    pub fn finish_phi_round(&mut self) -> Result<(), LearnerError> {
+        if self.phi.is_background() {
+            if self.phi.collect(&mut self.phi_store, true)? {
+                self.phi_version = PhiVersion(self.phi_version.0 + 1);
+            }
+            return Ok(());
+        }
+        while self.phi.is_active() {
+            self.phi_slice(usize::MAX)?;
+        }
+        Ok(())
     }
 
     /// One slice of the running φ round (at most `max_updates` and [`PHI_STEPS_PER_CALL`]
@@ -468,14 +502,14 @@ impl Learner {
 
     /// Runs one due self-imitation round (a high-level step, then a low-level step, each on its
     /// own batch with routes from `routes`; see [`crate::si::step`]) and returns the Adam steps
-    /// taken (0–2). Nothing runs while no round is due or a φ round is due or running (the
-    /// round stays due). Call it until it returns 0 and [`Learner::si_pending`] is 0, or once
+    /// taken (0–2). Nothing runs while no round is due or a φ round runs in line (the round
+    /// stays due); a φ round in the background does not hold it up. Call it until it returns 0 and [`Learner::si_pending`] is 0, or once
     /// per loop iteration.
     pub fn train_self_imitation(
         &mut self,
         routes: &mut dyn RouteSource,
     ) -> Result<usize, LearnerError> {
-        if self.si.pending() == 0 || self.phi.is_active() {
+        if self.si.pending() == 0 || (self.phi.is_active() && !self.phi.is_background()) {
             return Ok(0);
         }
         self.si

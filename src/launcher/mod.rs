@@ -320,6 +320,18 @@ fn sets_n_actors(file: Option<&std::path::Path>, sets: &[String]) -> bool {
     by_set || by_file
 }
 
+/// Settings a serial run cannot honour and stay deterministic, refused before any folder is
+/// touched.
+fn serial_fits(config: &protocol::Config) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !config.encoder.background_rounds,
+        "encoder.background_rounds = true runs φ rounds on a thread beside the SAC updates, \
+         which a serial run cannot do and stay deterministic: drop --serial (process mode), or \
+         set encoder.background_rounds = false"
+    );
+    Ok(())
+}
+
 /// Resolves `asi train`'s arguments into a run context (writes the resolved config). An
 /// existing run folder with a checkpoint is resumed ("resuming from checkpoint N (env steps
 /// S)"), after checking that the checkpoint fits this build and config, unless that checkpoint
@@ -345,6 +357,9 @@ pub fn prepare(args: &crate::cli::TrainArgs) -> anyhow::Result<Launch> {
         })?;
     for note in config.notes() {
         eprintln!("note: {note}");
+    }
+    if args.serial {
+        serial_fits(&config)?;
     }
     let run_dir = args.run_dir.clone().unwrap_or_else(|| config.run.run_dir());
     // Locked before anything in it is read or moved: a running launch keeps its folder.
@@ -559,6 +574,24 @@ mod tests {
         assert!(sets_n_actors(None, &[" run.n_actors = 3".to_owned()]));
         assert!(!sets_n_actors(None, &["run.n_actors_x=3".to_owned()]));
         assert!(!sets_n_actors(Some(&config("no-such.toml")), &[]));
+    }
+
+    #[test]
+    fn a_serial_run_with_background_phi_rounds_is_refused_before_its_folder_exists() {
+        let run_dir = std::env::temp_dir().join(format!("asi-serial-bg-{}", std::process::id()));
+        let args = |serial: bool| crate::cli::TrainArgs {
+            serial,
+            set: vec!["encoder.background_rounds=true".to_owned()],
+            run_dir: Some(run_dir.clone()),
+            ..Default::default()
+        };
+        let err = prepare(&args(true)).err().expect("refused");
+        assert!(
+            format!("{err:#}").contains("encoder.background_rounds = true"),
+            "{err:#}"
+        );
+        assert!(!run_dir.exists(), "nothing written for a refused launch");
+        assert!(serial_fits(&protocol::Config::default()).is_ok());
     }
 
     #[test]

@@ -132,15 +132,23 @@ pub struct Checkpoint {
 
 /// Fingerprint of the config sections that shape the learner's state — `env`, `hierarchy`,
 /// `learner`, `replay`, `encoder` — as [`ckpt::fingerprint`] of their JSON. Other sections (run
-/// length, seeds, exploration, graph, evaluation, transport) may change on resume.
+/// length, seeds, exploration, graph, evaluation, transport) may change on resume, and so may
+/// `encoder.background_rounds`: where a round runs is not part of the state (and checkpoints
+/// written before the key existed keep their fingerprint).
 pub fn config_fingerprint(config: &Config) -> String {
-    let sections = serde_json::json!({
+    let mut sections = serde_json::json!({
         "env": config.env,
         "hierarchy": config.hierarchy,
         "learner": config.learner,
         "replay": config.replay,
         "encoder": config.encoder,
     });
+    if let Some(encoder) = sections
+        .get_mut("encoder")
+        .and_then(serde_json::Value::as_object_mut)
+    {
+        encoder.remove("background_rounds");
+    }
     format!(
         "{:016x}",
         ckpt::fingerprint(sections.to_string().as_bytes())
@@ -235,7 +243,7 @@ const PARTS: &[Part] = &[
     },
     Part {
         file: "state.json",
-        save: |l| serde_json::to_vec_pretty(&State::of(l)).map_err(|e| e.to_string()),
+        save: |l| serde_json::to_vec_pretty(&State::of(l)?).map_err(|e| e.to_string()),
         restore: |l, b| {
             let state: State = serde_json::from_slice(b).map_err(|e| e.to_string())?;
             state.apply(l)
@@ -429,11 +437,16 @@ fn restore_columns(
     Ok(())
 }
 
+/// The φ trainer, which a checkpoint never finds away (no checkpoint while a round runs).
+fn phi_trainer(l: &Learner) -> Result<&crate::phi::PhiTrainer, String> {
+    l.phi.trainer().map_err(|e| e.to_string())
+}
+
 /// Names of the optimisers and log α in `optim.safetensors`: `{level}.{name}`.
 fn save_optim(l: &Learner) -> Result<Vec<u8>, String> {
     let mut arrays = Vec::new();
     let mut metadata = HashMap::new();
-    let mut opts = vec![("phi".to_owned(), l.phi.checkpoint_parts().0)];
+    let mut opts = vec![("phi".to_owned(), phi_trainer(l)?.checkpoint_parts().0)];
     let levels = [
         ("low", l.nets.low.optimizers()),
         ("high", l.nets.high.optimizers()),
@@ -509,7 +522,12 @@ fn restore_optim(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
             opt.import_state(state).map_err(|e| format!("{key}: {e}"))?;
         }
     }
-    let opt = l.phi.restore_parts().0;
+    let opt = l
+        .phi
+        .trainer_mut()
+        .map_err(|e| e.to_string())?
+        .restore_parts()
+        .0;
     let state = adam_state(&st, &metadata, "phi", opt)?;
     opt.import_state(state).map_err(|e| format!("phi: {e}"))
 }
@@ -758,7 +776,7 @@ impl TelemetrySaved {
     /// `None` when a value is not finite (JSON would write it as `null` and refuse it back).
     fn of(l: &Learner) -> Option<TelemetrySaved> {
         let t = &l.telemetry;
-        let (_, _, _, phi) = l.phi.checkpoint_parts();
+        let phi = l.phi.stats();
         let si = l.si.stats();
         let saved = TelemetrySaved {
             low: t.low,
@@ -782,7 +800,7 @@ impl TelemetrySaved {
         finite.then_some(saved)
     }
 
-    fn apply(self, l: &mut Learner) {
+    fn apply(self, l: &mut Learner) -> Result<(), String> {
         let t = &mut l.telemetry;
         t.low = self.low;
         t.low_deterministic = self.low_deterministic;
@@ -790,7 +808,11 @@ impl TelemetrySaved {
         t.skipped_nonfinite_low = self.skipped_nonfinite_low;
         t.skipped_nonfinite_high = self.skipped_nonfinite_high;
         t.last_policy_lag = self.last_policy_lag;
-        let (_, _, _, phi) = l.phi.restore_parts();
+        let (_, _, _, phi) = l
+            .phi
+            .trainer_mut()
+            .map_err(|e| e.to_string())?
+            .restore_parts();
         phi.triplet = self.phi_triplet;
         phi.stable_loss = self.phi_stable_loss;
         let si = l.si.stats_mut();
@@ -801,6 +823,7 @@ impl TelemetrySaved {
         si.via_frontier_fraction = self.si_via_frontier_fraction;
         si.high_grad_norm = self.si_high_grad_norm;
         si.low_grad_norm = self.si_low_grad_norm;
+        Ok(())
     }
 }
 
@@ -863,11 +886,11 @@ struct PhiSaved {
 }
 
 impl State {
-    fn of(l: &Learner) -> State {
+    fn of(l: &Learner) -> Result<State, String> {
         let s = &l.stats;
         let p = &l.publish;
-        let (_, phi_rng, next_round, phi_stats) = l.phi.checkpoint_parts();
-        State {
+        let (_, phi_rng, next_round, phi_stats) = phi_trainer(l)?.checkpoint_parts();
+        Ok(State {
             updates_low: l.updates_low,
             updates_high: l.updates_high,
             policy_version: l.policy_version,
@@ -914,7 +937,7 @@ impl State {
                 skipped_nonfinite_steps: phi_stats.skipped_nonfinite_steps,
                 nonfinite_rounds: phi_stats.nonfinite_rounds,
             },
-        }
+        })
     }
 
     fn apply(self, l: &mut Learner) -> Result<(), String> {
@@ -960,7 +983,11 @@ impl State {
             .restore_counters(self.schedule, self.count_window_episodes);
         l.telemetry.max_policy_lag = self.max_policy_lag;
         l.rng = self.sampling_rng;
-        let (_, rng, next_round, stats) = l.phi.restore_parts();
+        let (_, rng, next_round, stats) = l
+            .phi
+            .trainer_mut()
+            .map_err(|e| e.to_string())?
+            .restore_parts();
         let f = self.phi;
         *rng = f.rng;
         *next_round = f.next_round;
@@ -973,7 +1000,7 @@ impl State {
         stats.skipped_nonfinite_steps = f.skipped_nonfinite_steps;
         stats.nonfinite_rounds = f.nonfinite_rounds;
         if let Some(telemetry) = self.telemetry {
-            telemetry.apply(l);
+            telemetry.apply(l)?;
         }
         Ok(())
     }

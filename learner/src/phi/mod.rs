@@ -5,13 +5,17 @@
 //! - [`losses`]: the triplet and stable losses as pure functions.
 //! - [`round`]: the round schedule, sampling and Adam steps, run in slices by
 //!   [`crate::Learner::train`].
+//! - [`worker`]: where rounds run — in line with the SAC updates, or on a thread of their own.
 
 pub mod losses;
 pub mod round;
 pub mod store;
+pub mod worker;
 
 pub use losses::{stable_loss, triplet_loss, TripletStats};
 pub use round::{
-    phi_objective, phi_optimizer, PhiObjective, PhiParams, PhiStats, PhiTrainer, SliceOutcome,
+    phi_objective, phi_optimizer, Advance, PhiObjective, PhiParams, PhiStats, PhiTrainer,
+    SliceOutcome,
 };
-pub use store::{Candidate, PhiStore, RunKind, StoreStats};
+pub use store::{Candidate, PhiStore, RunKind, StoreStats, StoreView};
+pub use worker::PhiRunner;

@@ -35,6 +35,15 @@
 //!
 //! The Adam state (moments, step count) persists across rounds; φ is never re-initialised.
 //! Work is done in slices ([`PhiTrainer::run_slice`]) so that the owner stays responsive.
+//!
+//! Where the steps run: a round reads its triplets from a [`StoreView`] taken at its start, so
+//! its steps ([`PhiTrainer::advance`]) need no access to the store and can run on another
+//! thread; only the start (priorities, freeze) and the end ([`PhiTrainer::conclude`]:
+//! priorities written back, thaw) touch the store. A trainer made with
+//! [`PhiTrainer::with_private_copy`] trains a copy of the encoder, set from the published
+//! one when a round starts and copied into it when the round ends, so nothing reading the
+//! published encoder sees a round half done (`encoder.background_rounds`,
+//! [`crate::phi::worker`]); the steps are the same arithmetic either way.
 
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{Optimizer, VarBuilder, VarMap};
@@ -47,7 +56,7 @@ use rand_pcg::Pcg64Mcg;
 use crate::adam::{Adam, AdamParams};
 use crate::error::LearnerError;
 use crate::phi::losses::{stable_loss, triplet_loss, TripletStats};
-use crate::phi::store::{Candidate, PhiStore};
+use crate::phi::store::{Candidate, PhiStore, StoreView};
 
 /// `[encoder]` round parameters, resolved (k from `hierarchy.c` when absent).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -174,6 +183,8 @@ struct ActiveRound {
     index: u64,
     coeff: f64,
     old: Encoder,
+    /// The store's observations at the round's start: the candidates index into it.
+    view: StoreView,
     candidates: Vec<Candidate>,
     anchors: Vec<u32>,
     reg: RegSampler,
@@ -197,7 +208,19 @@ pub struct SliceOutcome {
     pub round_finished: bool,
 }
 
-/// The φ trainer: the published encoder's parameters, their Adam, the round state.
+/// What [`PhiTrainer::advance`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Advance {
+    /// Steps of the round used up (Adam steps plus skipped non-finite ones).
+    pub steps: u64,
+    /// Of `steps`, those skipped for a non-finite loss.
+    pub skipped_nonfinite: u64,
+    /// Every step of the round has run: [`PhiTrainer::conclude`] ends it.
+    pub done: bool,
+}
+
+/// The φ trainer: the encoder's parameters (the published ones, or a private copy of them),
+/// their Adam, the round state.
 pub struct PhiTrainer {
     params: PhiParams,
     spec_hidden: Vec<usize>,
@@ -205,6 +228,9 @@ pub struct PhiTrainer {
     latent_dim: usize,
     encoder: Encoder,
     vars: Vec<Var>,
+    /// With a private copy: the published encoder's variables (same order as `vars`), set
+    /// from `vars` when a round ends. `None`: `vars` are the published ones.
+    published: Option<Vec<Var>>,
     names: Vec<String>,
     opt: Adam,
     rng: Pcg64Mcg,
@@ -221,6 +247,37 @@ impl PhiTrainer {
         params: PhiParams,
         spec: &NetsSpec,
         policy_vm: &VarMap,
+        seed: u64,
+    ) -> Result<Self, LearnerError> {
+        Self::build(params, spec, policy_vm, None, seed)
+    }
+
+    /// A trainer of a private copy of the `encoder.*` parameters of `policy_vm`: a round
+    /// starts from the published values and writes its result into them when it ends
+    /// ([`PhiTrainer::conclude`]); meanwhile the published encoder does not change. Same
+    /// steps, same results as [`PhiTrainer::new`].
+    pub fn with_private_copy(
+        params: PhiParams,
+        spec: &NetsSpec,
+        policy_vm: &VarMap,
+        seed: u64,
+    ) -> Result<Self, LearnerError> {
+        let (names, published) = encoder_vars(policy_vm);
+        let private = VarMap::new();
+        {
+            let mut data = private.data().lock().unwrap_or_else(|p| p.into_inner());
+            for (name, var) in names.iter().zip(&published) {
+                data.insert(name.clone(), Var::from_tensor(&var.as_tensor().copy()?)?);
+            }
+        }
+        Self::build(params, spec, &private, Some(published), seed)
+    }
+
+    fn build(
+        params: PhiParams,
+        spec: &NetsSpec,
+        policy_vm: &VarMap,
+        published: Option<Vec<Var>>,
         seed: u64,
     ) -> Result<Self, LearnerError> {
         let (names, vars) = encoder_vars(policy_vm);
@@ -244,6 +301,7 @@ impl PhiTrainer {
             latent_dim: spec.latent_dim,
             encoder,
             vars,
+            published,
             names,
             opt,
             rng: Pcg64Mcg::seed_from_u64(seed),
@@ -336,6 +394,11 @@ impl PhiTrainer {
                 1.0 - self.params.regularization_low_ratio,
             )),
         };
+        if let Some(published) = &self.published {
+            for (private, var) in self.vars.iter().zip(published) {
+                private.set(var.as_tensor())?;
+            }
+        }
         store.freeze();
         self.active = Some(ActiveRound {
             index,
@@ -346,6 +409,7 @@ impl PhiTrainer {
                 self.params.stable_coeff_for(index.max(1))
             },
             old: self.snapshot()?,
+            view: store.view(),
             new_priority: vec![f32::NAN; candidates.len()],
             candidates,
             anchors,
@@ -378,59 +442,105 @@ impl PhiTrainer {
     /// Runs at most `max_steps` steps of the active round; at its end writes the priorities
     /// back, thaws `store` and reports `round_finished` (unless every step of the round was
     /// skipped as non-finite). No-op without an active round. A non-finite step is skipped and
-    /// counted, not an error.
+    /// counted, not an error; an error ends the round (thawed, priorities not written).
     pub fn run_slice(
         &mut self,
         store: &mut PhiStore,
         max_steps: u64,
     ) -> Result<SliceOutcome, LearnerError> {
+        let advance = match self.advance(max_steps) {
+            Ok(advance) => advance,
+            Err(err) => {
+                self.abandon(store);
+                return Err(err);
+            }
+        };
+        let round_finished = advance.done && self.conclude(store)?;
+        Ok(SliceOutcome {
+            steps: advance.steps,
+            skipped_nonfinite: advance.skipped_nonfinite,
+            round_finished,
+        })
+    }
+
+    /// Runs at most `max_steps` steps of the active round, reading only the round's
+    /// [`StoreView`] (so it may run away from the store's owner). No-op without an active
+    /// round. After an error the round stays active: [`PhiTrainer::abandon`] ends it.
+    pub fn advance(&mut self, max_steps: u64) -> Result<Advance, LearnerError> {
         let Some(mut round) = self.active.take() else {
-            return Ok(SliceOutcome::default());
+            return Ok(Advance::default());
         };
         let start = std::time::Instant::now();
         let n = max_steps.min(self.params.steps_per_round - round.steps_done);
         round.slice_loss_sum = 0.0;
         round.slice_samples = 0;
         let skipped_before = round.skipped_steps;
-        let result = (0..n).try_for_each(|_| self.step(&mut round, store));
+        let result = (0..n).try_for_each(|_| self.step(&mut round));
         self.stats.secs += start.elapsed().as_secs_f64();
-        if let Err(err) = result {
-            self.abort(round, store);
-            return Err(err);
-        }
-        let mut outcome = SliceOutcome {
+        let advance = Advance {
             steps: n,
             skipped_nonfinite: round.skipped_steps - skipped_before,
-            round_finished: false,
+            done: round.steps_done >= self.params.steps_per_round,
         };
         // A slice of skipped steps only has no loss to report; the previous value stays.
         let slice_mean =
             (round.slice_samples > 0).then(|| round.slice_loss_sum / round.slice_samples as f64);
-        if round.steps_done == n {
-            if let Some(mean) = slice_mean {
+        if let (Ok(()), Some(mean)) = (&result, slice_mean) {
+            if round.steps_done == n {
                 self.stats.round_start_loss = mean;
             }
+            if advance.done {
+                self.stats.round_end_loss = mean;
+            }
         }
+        self.active = Some(round);
+        result.map(|()| advance)
+    }
+
+    /// Ends the active round once all its steps have run: the trained encoder copied into
+    /// the published one (with a private copy), the priorities written back, `store` thawed;
+    /// returns whether φ changed. A round whose every step was skipped as non-finite ends
+    /// with φ and the priorities unchanged (`false`, counted). A round with steps left, or
+    /// none, is left as it is (`false`).
+    pub fn conclude(&mut self, store: &mut PhiStore) -> Result<bool, LearnerError> {
+        let Some(round) = self.active.take() else {
+            return Ok(false);
+        };
         if round.steps_done < self.params.steps_per_round {
             self.active = Some(round);
-            return Ok(outcome);
+            return Ok(false);
         }
         if round.skipped_steps == round.steps_done {
             self.stats.nonfinite_rounds += 1;
-            self.abort(round, store);
-            return Ok(outcome);
+            store.thaw();
+            return Ok(false);
         }
-        if let Some(mean) = slice_mean {
-            self.stats.round_end_loss = mean;
+        if let Some(published) = &self.published {
+            let copied = published
+                .iter()
+                .zip(&self.vars)
+                .try_for_each(|(var, private)| var.set(private.as_tensor()));
+            if let Err(err) = copied {
+                store.thaw();
+                return Err(err.into());
+            }
         }
         self.finish(round, store);
-        outcome.round_finished = true;
-        Ok(outcome)
+        Ok(true)
+    }
+
+    /// Ends the active round, if any, without its result (after an error): priorities not
+    /// written, the published encoder as it was (with a private copy; in place, the steps
+    /// taken stay), `store` thawed so ingest goes on.
+    pub fn abandon(&mut self, store: &mut PhiStore) {
+        if self.active.take().is_some() {
+            store.thaw();
+        }
     }
 
     /// One Adam step of `round`, or none when the loss is not finite (counted; φ and the
     /// priorities untouched).
-    fn step(&mut self, round: &mut ActiveRound, store: &PhiStore) -> Result<(), LearnerError> {
+    fn step(&mut self, round: &mut ActiveRound) -> Result<(), LearnerError> {
         let b = self.params.batch_size;
         let with_stable = round.coeff > 0.0;
         let drawn: Vec<usize> = (0..b)
@@ -441,7 +551,7 @@ impl PhiTrainer {
         } else {
             Vec::new()
         };
-        let input = self.gather(round, store, &drawn, &reg)?;
+        let input = self.gather(round, &drawn, &reg)?;
         let stable_term = with_stable.then_some((&round.old, round.coeff));
         let objective = phi_objective(&self.encoder, &input, b, self.params.margin, stable_term)?;
         let PhiObjective {
@@ -473,10 +583,10 @@ impl PhiTrainer {
     fn gather(
         &mut self,
         round: &ActiveRound,
-        store: &PhiStore,
         drawn: &[usize],
         reg: &[usize],
     ) -> Result<Tensor, LearnerError> {
+        let store = &round.view;
         let k = store.negative_offset() as u32;
         self.staging.clear();
         for offset in [0, 1, k] {
@@ -508,12 +618,6 @@ impl PhiTrainer {
         store.thaw();
         self.stats.rounds += 1;
         debug_assert!(round.index < self.next_round);
-    }
-
-    /// Drops `round` after an error or with every step skipped (its priorities are not
-    /// written); the store is thawed so ingest goes on.
-    fn abort(&mut self, _round: ActiveRound, store: &mut PhiStore) {
-        store.thaw();
     }
 }
 
@@ -578,8 +682,9 @@ pub fn phi_optimizer(vars: Vec<Var>, lr: f64) -> Result<Adam, LearnerError> {
     Ok(Adam::new(vars, AdamParams::with_lr(lr))?)
 }
 
-/// The state at `(run, t)` or an error (cannot happen while the store is frozen).
-fn state(store: &PhiStore, run: u32, t: u32) -> Result<&[f32], LearnerError> {
+/// The state at `(run, t)` or an error (cannot happen: the view is the store at the round's
+/// start, which the candidates index).
+fn state(store: &StoreView, run: u32, t: u32) -> Result<&[f32], LearnerError> {
     store.state(run, t).ok_or(LearnerError::Unsupported {
         key: "encoder",
         reason: format!("φ store has no state {t} in run {run} (store changed during a round)"),

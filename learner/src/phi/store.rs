@@ -23,13 +23,19 @@
 //! meanwhile are staged and only enter the store (and evict) when it thaws, so the round's
 //! candidate indices stay valid and the round sees exactly the episodes ingested before it
 //! started — whatever the actors' speed.
+//!
+//! A run's observations never change once stored, so they are shared (`Arc`): a
+//! [`StoreView`] of the stored runs costs one reference per run, and a round run on another
+//! thread (`encoder.background_rounds`) reads its triplets from the view while ingest stages
+//! new runs here. Priorities stay in the store; only the owner reads and writes them.
 
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 /// One stored run of consecutive states of one episode.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StateRun {
-    obs: Vec<f32>,
+    obs: Arc<[f32]>,
     priority: Vec<f32>,
 }
 
@@ -121,7 +127,7 @@ impl PhiStore {
             return;
         }
         let run = StateRun {
-            obs,
+            obs: obs.into(),
             priority: vec![1.0; n],
         };
         if self.frozen {
@@ -166,9 +172,7 @@ impl PhiStore {
     /// The stored runs, oldest first, as `(obs, priority)` (checkpoints; staged runs are not
     /// included: a checkpoint is never taken while a round holds the store).
     pub(crate) fn runs(&self) -> impl Iterator<Item = (&[f32], &[f32])> {
-        self.runs
-            .iter()
-            .map(|r| (r.obs.as_slice(), r.priority.as_slice()))
+        self.runs.iter().map(|r| (&*r.obs, r.priority.as_slice()))
     }
 
     /// Replaces the contents of an empty, thawed store with `runs` (oldest first, `(obs,
@@ -200,7 +204,10 @@ impl PhiStore {
         }
         self.runs = runs
             .into_iter()
-            .map(|(obs, priority)| StateRun { obs, priority })
+            .map(|(obs, priority)| StateRun {
+                obs: obs.into(),
+                priority,
+            })
             .collect();
         self.n_states = total;
         self.staged.clear();
@@ -225,9 +232,17 @@ impl PhiStore {
 
     /// State `t` of run `run` (`obs_dim` floats); `None` when out of range.
     pub fn state(&self, run: u32, t: u32) -> Option<&[f32]> {
-        let r = self.runs.get(run as usize)?;
-        let start = (t as usize).checked_mul(self.obs_dim)?;
-        r.obs.get(start..start + self.obs_dim)
+        state_in(&self.runs.get(run as usize)?.obs, t, self.obs_dim)
+    }
+
+    /// The stored runs' observations as they are now (staged runs not included), indexed as
+    /// [`PhiStore::state`] and [`Candidate`]s: what a round samples from.
+    pub fn view(&self) -> StoreView {
+        StoreView {
+            obs_dim: self.obs_dim,
+            negative_offset: self.negative_offset,
+            runs: self.runs.iter().map(|r| Arc::clone(&r.obs)).collect(),
+        }
     }
 
     /// Stored priority of state `t` of run `run`.
@@ -280,6 +295,33 @@ impl PhiStore {
     pub fn stats(&self) -> StoreStats {
         self.stats
     }
+}
+
+/// The observations of a store's runs at one moment ([`PhiStore::view`]); `Send`, so a round
+/// on another thread reads them while the store goes on staging.
+#[derive(Debug, Clone)]
+pub struct StoreView {
+    obs_dim: usize,
+    negative_offset: usize,
+    runs: Vec<Arc<[f32]>>,
+}
+
+impl StoreView {
+    /// State `t` of run `run`, as [`PhiStore::state`] gave it when the view was taken.
+    pub fn state(&self, run: u32, t: u32) -> Option<&[f32]> {
+        state_in(self.runs.get(run as usize)?, t, self.obs_dim)
+    }
+
+    /// The negative offset k.
+    pub fn negative_offset(&self) -> usize {
+        self.negative_offset
+    }
+}
+
+/// State `t` (`obs_dim` floats) of a run's observations; `None` when out of range.
+fn state_in(obs: &[f32], t: u32, obs_dim: usize) -> Option<&[f32]> {
+    let start = (t as usize).checked_mul(obs_dim)?;
+    obs.get(start..start.checked_add(obs_dim)?)
 }
 
 /// The states of one open episode's current run, built chunk by chunk during ingest:

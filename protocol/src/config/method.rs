@@ -60,6 +60,13 @@ pub struct EncoderConfig {
     /// How regularized states are chosen: `"inverse_sqrt_priority"` (default, paper's intent)
     /// or `"drop_lowest_loss"` (code).
     pub stable_weighting: StableWeighting,
+    /// Process mode only: run each round on a thread of its own while the SAC updates go on
+    /// (and the actors with them) on the encoder as it was, which the round's result replaces
+    /// when it ends. Default false: the round stops the SAC updates until it ends, as the code
+    /// (one process, rounds in line) and serial mode, which refuses `true`. Gains up to the
+    /// round's share of the learner's time where a core is free for it; the φ an update or an
+    /// actor sees is then up to one round's duration older.
+    pub background_rounds: bool,
 }
 
 impl Default for EncoderConfig {
@@ -80,6 +87,7 @@ impl Default for EncoderConfig {
             anchor_high_ratio: 0.5,
             regularization_low_ratio: 0.3,
             stable_weighting: StableWeighting::InverseSqrtPriority,
+            background_rounds: false,
         }
     }
 }
