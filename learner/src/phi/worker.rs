@@ -130,9 +130,12 @@ impl PhiRunner {
             return Ok(false);
         }
         let stats = self.stats();
-        let State::Away { worker, .. } = std::mem::replace(&mut self.state, State::Lost(stats))
-        else {
-            return Ok(false);
+        let worker = match std::mem::replace(&mut self.state, State::Lost(stats)) {
+            State::Away { worker, .. } => worker,
+            other => {
+                self.state = other;
+                return Ok(false);
+            }
         };
         let (mut trainer, steps) = match worker.join() {
             Ok(returned) => returned,
@@ -164,9 +167,12 @@ impl PhiRunner {
     /// Hands the trainer, with its round just started, to a worker thread that runs every step.
     fn send_away(&mut self, store: &mut PhiStore) -> Result<(), LearnerError> {
         let stats = self.stats();
-        let State::Here(mut trainer) = std::mem::replace(&mut self.state, State::Lost(stats))
-        else {
-            return Err(away());
+        let mut trainer = match std::mem::replace(&mut self.state, State::Lost(stats)) {
+            State::Here(trainer) => trainer,
+            other => {
+                self.state = other;
+                return Err(away());
+            }
         };
         let spawned = std::thread::Builder::new()
             .name("phi-round".to_owned())
