@@ -385,9 +385,7 @@ impl Learner {
     pub fn train(&mut self, max_updates: usize) -> Result<usize, LearnerError> {
         let episodes = self.schedule.train_episodes();
         if self.phi.is_background() {
-            if self.phi.collect(&mut self.phi_store, false)? {
-                self.phi_version = PhiVersion(self.phi_version.0 + 1);
-            }
+            self.collect_phi_round(false)?;
             self.phi.start_if_due(episodes, &mut self.phi_store)?;
             return self.train_sac(max_updates);
         }
@@ -401,13 +399,19 @@ impl Learner {
     /// it (background); no SAC update runs. Before a final checkpoint, which a round defers.
     pub fn finish_phi_round(&mut self) -> Result<(), LearnerError> {
         if self.phi.is_background() {
-            if self.phi.collect(&mut self.phi_store, true)? {
-                self.phi_version = PhiVersion(self.phi_version.0 + 1);
-            }
-            return Ok(());
+            return self.collect_phi_round(true);
         }
         while self.phi.is_active() {
             self.phi_slice(usize::MAX)?;
+        }
+        Ok(())
+    }
+
+    /// Collects a background round (at once when `wait`, else only if it has finished);
+    /// φ's version goes up when the round changed φ.
+    fn collect_phi_round(&mut self, wait: bool) -> Result<(), LearnerError> {
+        if self.phi.collect(&mut self.phi_store, wait)? {
+            self.phi_version = PhiVersion(self.phi_version.0 + 1);
         }
         Ok(())
     }
