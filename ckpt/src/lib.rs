@@ -134,13 +134,13 @@ pub enum Checksum {
 }
 
 impl Checksum {
-    /// The checksum of a manifest of `format_version`, written by a reader whose own format is
+    /// The checksum of a manifest of `format_version`, read by a reader whose own format is
     /// `current` (a format from 2 on, which writes CRC-64): `None` for a version it cannot
-    /// read (newer, or an unknown one).
+    /// read (newer than `current`, or 0).
     pub fn of_format(format_version: u32, current: u32) -> Option<Self> {
         match format_version {
             1 => Some(Self::Fnv1aWords),
-            v if v == current => Some(Self::Crc64),
+            v if (2..=current).contains(&v) => Some(Self::Crc64),
             _ => None,
         }
     }
@@ -167,7 +167,7 @@ pub fn check_versions(
         incompatible(
             path,
             "format version",
-            format!("{current} (or 1)"),
+            format!("1 to {current}"),
             format.to_string(),
         )
     })?;
@@ -667,19 +667,20 @@ mod tests {
     }
 
     #[test]
-    fn check_versions_reads_format_1_and_the_current_one_and_names_what_differs() {
+    fn check_versions_reads_formats_1_to_the_current_one_and_names_what_differs() {
         let path = Path::new("/run/checkpoints/ckpt-000003/manifest.json");
         assert_eq!(
             check_versions(path, (1, 7), 3, 7).unwrap(),
             Checksum::Fnv1aWords
         );
+        assert_eq!(check_versions(path, (2, 7), 3, 7).unwrap(), Checksum::Crc64);
         assert_eq!(check_versions(path, (3, 7), 3, 7).unwrap(), Checksum::Crc64);
         for (versions, differs, expected, found) in [
-            ((2, 7), "format version", "3 (or 1)", "2"),
-            ((4, 7), "format version", "3 (or 1)", "4"),
+            ((0, 7), "format version", "1 to 3", "0"),
+            ((4, 7), "format version", "1 to 3", "4"),
             ((3, 6), "protocol version", "7", "6"),
             // An unreadable format is named before the protocol.
-            ((4, 6), "format version", "3 (or 1)", "4"),
+            ((4, 6), "format version", "1 to 3", "4"),
         ] {
             match check_versions(path, versions, 3, 7) {
                 Err(FileError::Incompatible {
@@ -756,6 +757,10 @@ mod tests {
         assert_eq!(Checksum::of_format(2, 2), Some(Checksum::Crc64));
         assert_eq!(Checksum::of_format(3, 2), None);
         assert_eq!(Checksum::of_format(0, 2), None);
+        // A reader of format 3 reads format 2 (CRC-64 too), not format 4.
+        assert_eq!(Checksum::of_format(2, 3), Some(Checksum::Crc64));
+        assert_eq!(Checksum::of_format(3, 3), Some(Checksum::Crc64));
+        assert_eq!(Checksum::of_format(4, 3), None);
         // A format-1 entry (fingerprint) reads with its own checksum, not with format 2's.
         let dir = scratch("format1");
         let folder = TmpFolder::begin(&dir, "ckpt-", ".tmp-ckpt-").unwrap();

@@ -381,7 +381,7 @@ fn another_format_version_or_config_shape_is_refused_as_incompatible() {
             assert_eq!(what, "format version");
             let current = graph_service::checkpoint::FORMAT_VERSION;
             assert_eq!(found, (current + 1).to_string());
-            assert_eq!(expected, format!("{current} (or 1)"));
+            assert_eq!(expected, format!("1 to {current}"));
         }
         other => panic!("expected Incompatible, got {other}"),
     }

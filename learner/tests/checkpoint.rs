@@ -508,7 +508,12 @@ fn a_two_bit_error_that_the_format_1_checksum_misses_is_refused() {
 fn a_format_1_checkpoint_still_restores_and_its_checksums_still_guard_it() {
     let (_dir, ckpt) = saved("format-1");
     let current = read_manifest(&ckpt);
-    assert_eq!(current.format_version, 2);
+    assert_eq!(current.format_version, 3);
+    // A format-2 manifest lists its files with the same CRC-64 sums.
+    let mut format_2 = current.clone();
+    format_2.format_version = 2;
+    fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&format_2).unwrap()).unwrap();
+    assert!(Learner::restore_checkpoint(&config(), DIMS, &ckpt).is_ok());
     // The manifest as a format-1 build wrote it: the same files, word-wise FNV-1a sums.
     let mut old = current.clone();
     old.format_version = 1;
@@ -520,7 +525,7 @@ fn a_format_1_checkpoint_still_restores_and_its_checksums_still_guard_it() {
     fs::write(ckpt.join(MANIFEST), serde_json::to_vec(&old).unwrap()).unwrap();
     let (restored, info) = Learner::restore_checkpoint(&config(), DIMS, &ckpt).unwrap();
     assert_eq!(info.manifest, old);
-    // It is the saved learner: written again (as format 2), every file is the same.
+    // It is the saved learner: written again (as format 3), every file is the same.
     let again = restored
         .save_checkpoint(&config(), &scratch("format-1-again"))
         .unwrap();

@@ -496,7 +496,7 @@ fn resume_point(
     if !readable || manifest.protocol_version != protocol::PROTOCOL_VERSION {
         bail!(
             "checkpoint {} has format/protocol version {versions:?}, this build reads \
-             ({FORMAT_VERSION} or 1, {}); start over with --restart",
+             (1 to {FORMAT_VERSION}, {}); start over with --restart",
             path.display(),
             protocol::PROTOCOL_VERSION
         );

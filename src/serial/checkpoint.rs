@@ -429,7 +429,7 @@ fn check_compatible(
     let (Some(sum), PROTOCOL_VERSION) = (sum, manifest.protocol_version) else {
         bail!(
             "serial checkpoint {} has format/protocol version {versions:?}, this build needs \
-             ({FORMAT_VERSION} or 1, {PROTOCOL_VERSION}); start over with --restart",
+             (1 to {FORMAT_VERSION}, {PROTOCOL_VERSION}); start over with --restart",
             path.display()
         );
     };

@@ -9,7 +9,7 @@
 //! | `policy.safetensors` | published parameters (encoder, high and low policies) |
 //! | `critic.safetensors`, `target.safetensors` | online and target critics (and the deterministic low level's target actor) |
 //! | `optim.safetensors` | Adam m and v of every optimiser, log α; step counts in metadata |
-//! | `replay_low.safetensors`, `replay_high.safetensors` | buffer columns, rows `0..len`; ring in metadata |
+//! | `replay_low.safetensors`, `replay_high.safetensors` | buffer columns, rows `0..len` (next observations only where they are not the next row's: [`LOW_SUCCESSORS`]); ring in metadata |
 //! | `phi_store.safetensors` | φ store runs (observations, priorities); run lengths and stats in metadata |
 //! | `si.safetensors` | self-imitation buffer (entries, episode serials, start states); due rounds and counters in metadata |
 //! | `state.json` | counters, publication bookkeeping, schedule, generators, φ trainer scalars |
@@ -59,9 +59,11 @@ use crate::si::losses::SiLossStats;
 use crate::si::{SiBuffer, SiBufferParts, SiStats};
 use nets::TaskDims;
 
-/// Version of the checkpoint format; a checkpoint of another version is refused, but for
-/// format 1 (the same files, checksummed with [`ckpt::fingerprint`]; see [`ckpt::Checksum`]).
-pub const FORMAT_VERSION: u32 = 2;
+/// Version of the checkpoint format; a newer one is refused. Format 3 writes the replay
+/// buffers' next observations only where they are not the next row's observation
+/// ([`LOW_SUCCESSORS`]); format 2 wrote them whole, as format 1, which also checksummed with
+/// [`ckpt::fingerprint`] (see [`ckpt::Checksum`]). All three are read.
+pub const FORMAT_VERSION: u32 = 3;
 /// Name of the manifest inside a checkpoint folder.
 pub const MANIFEST: &str = "manifest.json";
 /// Checkpoints kept in `checkpoints/` (older ones are removed after a new one is written).
@@ -213,22 +215,22 @@ const PARTS: &[Part] = &[
         file: "replay_low.safetensors",
         save: |l| {
             let r = &l.low_replay;
-            save_columns(r.ring(), &r.columns())
+            save_columns(r.ring(), &r.columns(), LOW_SUCCESSORS)
         },
         restore: |l, b| {
             let (ring, columns) = l.low_replay.parts_mut();
-            restore_columns(b, ring, columns)
+            restore_columns(b, ring, columns, LOW_SUCCESSORS)
         },
     },
     Part {
         file: "replay_high.safetensors",
         save: |l| {
             let r = &l.high_replay;
-            save_columns(r.ring(), &r.columns())
+            save_columns(r.ring(), &r.columns(), HIGH_SUCCESSORS)
         },
         restore: |l, b| {
             let (ring, columns) = l.high_replay.parts_mut();
-            restore_columns(b, ring, columns)
+            restore_columns(b, ring, columns, HIGH_SUCCESSORS)
         },
     },
     Part {
@@ -383,33 +385,99 @@ fn f32_array(st: &SafeTensors, name: &str, len: usize) -> Result<Vec<f32>, Strin
     array(st, name, Some(len))
 }
 
-/// Rows `0..len` of every column, the ring in metadata.
-fn save_columns(ring: &Ring, columns: &[(&'static str, &Column)]) -> Result<Vec<u8>, String> {
+/// Pairs `(derived, source)` of columns where row `i` of `derived` is, for most rows, row
+/// `i + 1` of `source` in insertion order: the next observation (and its φ) of a transition is
+/// the observation of the next one, except at the end of an episode or where the rows of
+/// several actors' chunks meet. A checkpoint stores `derived` only where it is not (format 3).
+pub(crate) const LOW_SUCCESSORS: &[(&str, &str)] = &[("next_obs", "obs"), ("next_phi", "phi")];
+/// As [`LOW_SUCCESSORS`] for the high buffer (consecutive segments of an episode).
+pub(crate) const HIGH_SUCCESSORS: &[(&str, &str)] = &[("next_obs", "obs")];
+/// Name of the per-row flag tensor (U8): 1 where every derived column's row is its source's
+/// successor row, bit for bit.
+const FOLLOWS: &str = "follows";
+
+/// Rows `0..len` of every column, the ring in metadata. A column named as `derived` in
+/// `successors` keeps only the rows where [`FOLLOWS`] is 0 (in row order); the others are
+/// rebuilt from the source column on restore.
+fn save_columns(
+    ring: &Ring,
+    columns: &[(&'static str, &Column)],
+    successors: &[(&str, &str)],
+) -> Result<Vec<u8>, String> {
     let len = ring.len();
-    let arrays = columns
+    let named = |name: &str| {
+        columns
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, col)| *col)
+            .ok_or_else(|| format!("no column `{name}`"))
+    };
+    let pairs = successors
         .iter()
-        .map(|(name, col)| {
-            (
-                (*name).to_owned(),
-                vec![len, col.width()],
-                col.export_rows(len),
-            )
+        .map(|&(derived, source)| {
+            let (d, s) = (named(derived)?, named(source)?);
+            if d.width() != s.width() {
+                return Err(format!("`{derived}` and `{source}` differ in width"));
+            }
+            Ok((d, s))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    let follows: Vec<u8> = (0..len)
+        .map(|i| {
+            let same = |(d, s): &(&Column, &Column)| {
+                successor(ring, i).is_some_and(|j| bitwise_equal(d.row(i), s.row(j)))
+            };
+            u8::from(!pairs.is_empty() && pairs.iter().all(same))
         })
         .collect();
+    let tensor = |name: &str, rows: usize, width: usize, values: Vec<f32>| {
+        Tensor::from_vec(values, (rows, width), &Device::Cpu)
+            .map(|t| (name.to_owned(), t))
+            .map_err(|e| e.to_string())
+    };
+    let mut tensors = Vec::with_capacity(columns.len() + 1);
+    for (name, col) in columns {
+        let (rows, values) = if successors.iter().any(|(d, _)| d == name) {
+            let kept = (0..len).filter(|&i| follows[i] == 0);
+            let values: Vec<f32> = kept.flat_map(|i| col.row(i).iter().copied()).collect();
+            (values.len() / col.width().max(1), values)
+        } else {
+            (len, col.export_rows(len))
+        };
+        tensors.push(tensor(name, rows, col.width(), values)?);
+    }
+    if !successors.is_empty() {
+        let flags = Tensor::from_vec(follows, len, &Device::Cpu).map_err(|e| e.to_string())?;
+        tensors.push((FOLLOWS.to_owned(), flags));
+    }
     let metadata = HashMap::from([
         ("capacity".to_owned(), ring.capacity().to_string()),
         ("len".to_owned(), len.to_string()),
         ("next".to_owned(), ring.next().to_string()),
         ("total".to_owned(), ring.total().to_string()),
     ]);
-    to_safetensors(arrays, metadata)
+    serialize(tensors, metadata)
 }
 
-/// Fills fresh columns and the ring from [`save_columns`] bytes.
+/// The row written after row `i` (physical index; rows `0..len` valid), if any: `None` for
+/// the newest row.
+fn successor(ring: &Ring, i: usize) -> Option<usize> {
+    let j = (i + 1) % ring.capacity();
+    (j < ring.len() && j != ring.next()).then_some(j)
+}
+
+fn bitwise_equal(a: &[f32], b: &[f32]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// Fills fresh columns and the ring from [`save_columns`] bytes: of format 3 (with
+/// [`FOLLOWS`]: the derived columns rebuilt from `successors`) or of formats 1–2 (every column
+/// whole).
 fn restore_columns(
     bytes: &[u8],
     ring: &mut Ring,
     columns: [(&'static str, &mut Column); 8],
+    successors: &[(&str, &str)],
 ) -> Result<(), String> {
     let (st, metadata) = parse_safetensors(bytes)?;
     let capacity: usize = meta(&metadata, "capacity")?;
@@ -426,12 +494,60 @@ fn restore_columns(
         meta(&metadata, "total")?,
     )
     .ok_or("inconsistent ring bookkeeping (len, next, total)")?;
-    let data = columns
-        .iter()
-        .map(|(name, col)| f32_array(&st, name, restored.len() * col.width()))
-        .collect::<Result<Vec<_>, _>>()?;
-    for ((_, col), values) in columns.into_iter().zip(data) {
-        col.import_rows(&values);
+    let len = restored.len();
+    let follows = match st.tensor(FOLLOWS) {
+        Ok(_) => Some(array::<u8>(&st, FOLLOWS, Some(len))?),
+        Err(_) => None,
+    };
+    let width = |name: &str| {
+        columns
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, col)| col.width())
+            .ok_or_else(|| format!("no column `{name}`"))
+    };
+    let mut data: HashMap<&str, Vec<f32>> = HashMap::new();
+    for (name, col) in &columns {
+        let derived = successors.iter().any(|(d, _)| d == name);
+        let rows = match (&follows, derived) {
+            (Some(f), true) => f.iter().filter(|&&x| x == 0).count(),
+            _ => len,
+        };
+        data.insert(*name, f32_array(&st, name, rows * col.width())?);
+    }
+    if let Some(follows) = &follows {
+        if let Some(bad) = follows.iter().position(|&x| x > 1) {
+            return Err(format!(
+                "`{FOLLOWS}` row {bad} is {}, not 0 or 1",
+                follows[bad]
+            ));
+        }
+        for &(derived, source) in successors {
+            let w = width(derived)?;
+            if width(source)? != w {
+                return Err(format!("`{derived}` and `{source}` differ in width"));
+            }
+            let kept = &data[derived];
+            let from = &data[source];
+            let mut whole = Vec::with_capacity(len * w);
+            let mut next_kept = kept.chunks_exact(w.max(1));
+            for (i, &flag) in follows.iter().enumerate() {
+                let row = match flag {
+                    1 => {
+                        let j = successor(&restored, i).ok_or_else(|| {
+                            format!("`{FOLLOWS}` marks the newest row {i} as followed")
+                        })?;
+                        &from[j * w..(j + 1) * w]
+                    }
+                    _ => next_kept.next().unwrap_or(&[]),
+                };
+                whole.extend_from_slice(row);
+            }
+            data.insert(derived, whole);
+        }
+    }
+    for (name, col) in columns {
+        col.import_rows(&data[name]);
     }
     *ring = restored;
     Ok(())
@@ -1005,3 +1121,6 @@ impl State {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests;
