@@ -22,6 +22,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import fr_outcomes  # noqa: E402
 import count_choice  # noqa: E402
+import eval_table  # noqa: E402
 import fr_trace  # noqa: E402
 import launch_history  # noqa: E402
 import maze_path  # noqa: E402
@@ -1034,6 +1035,76 @@ class RunArchive(unittest.TestCase):
         with open(os.path.join(good, "metrics.jsonl.gz"), "wb") as handle:
             handle.write(b"not gzip")
         self.assertEqual(len(list(fr_outcomes.records(os.path.join(good, "metrics.jsonl")))), 3)
+
+
+class EvalTable(unittest.TestCase):
+    """eval_table.py: first successes, window counts and means, coverage at episodes."""
+
+    def run_dir(self, name, evals, metrics, packed=False):
+        path = os.path.join(self.tmp.name, name)
+        os.makedirs(path)
+        with open(os.path.join(path, "eval.jsonl"), "w") as out:
+            for episode, rate, distance in evals:
+                out.write(json.dumps({"train_episodes": episode, "success_rate": rate,
+                                      "mean_final_path_distance": distance}) + "\n")
+        lines = "".join(json.dumps(m) + "\n" for m in metrics)
+        if packed:
+            with gzip.open(os.path.join(path, "metrics.jsonl.gz"), "wt") as out:
+                out.write(lines)
+        else:
+            with open(os.path.join(path, "metrics.jsonl"), "w") as out:
+                out.write(lines)
+        return path
+
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.addCleanup(self.tmp.cleanup)
+        # Episodes of 500 steps; a metrics line every 25 episodes, the first one with no coverage.
+        self.metrics = [{"learner/schedule/train_episodes": e, "learner/ingest/env_steps": 500.0 * e + 7,
+                         **({"learner/charts/coverage": e / 1000} if e else {})}
+                        for e in range(0, 401, 25)]
+        # Episode 200 evaluated twice (a resume): the newest line counts.
+        self.evals = [(50, 0.0, 20.0), (100, 0.0, 18.0), (150, 0.2, 9.0), (200, 0.0, 12.0),
+                      (200, 0.5, 4.0), (250, 1.0, 1.0), (300, 0.0, 11.0)]
+
+    def test_figures_against_hand_computed_values(self):
+        run = self.run_dir("a", self.evals, self.metrics)
+        s = eval_table.summary(run, (150, 300), [100, 130, 400, 500])
+        self.assertEqual(s["evaluations"], 6)
+        self.assertEqual(s["last_episode"], 300)
+        self.assertEqual((s["first_success"], s["first_success_rate"]), (150, 0.2))
+        self.assertEqual(s["first_success_env_steps"], 75007)
+        self.assertEqual(s["first_full"], 250)
+        self.assertEqual(s["window_evaluations"], 4)
+        self.assertEqual(s["window_successes"], [0.2, 0.5, 1.0])
+        self.assertAlmostEqual(s["window_mean_success"], (0.2 + 0.5 + 1.0 + 0.0) / 4)
+        self.assertAlmostEqual(s["window_mean_path_distance"], (9.0 + 4.0 + 1.0 + 11.0) / 4)
+        # The first line reaching 130 is episode 150's; nothing reaches 500.
+        self.assertEqual(s["coverage"], {100: 0.1, 130: 0.15, 400: 0.4})
+        # Without a window every evaluation counts.
+        s = eval_table.summary(run)
+        self.assertEqual((s["window"], s["window_evaluations"]), ((50, 300), 6))
+
+    def test_the_table_has_a_column_per_run_and_reads_packed_metrics(self):
+        a = self.run_dir("asi", self.evals, self.metrics)
+        never = self.run_dir("no-si", [(50, 0.0, 20.0), (100, 0.0, 19.0)], self.metrics, packed=True)
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "eval_table.py")
+        done = subprocess.run([sys.executable, script, "--window", "100-250", "--at", "100,200", a, never],
+                              capture_output=True, text=True)
+        self.assertEqual(done.returncode, 0, done.stderr)
+        lines = done.stdout.splitlines()
+        self.assertEqual(lines[0], "| | asi | no-si |")
+        self.assertIn("| first test success: episode (env steps), rate | 150 (75,007), 0.2 | none |", lines)
+        self.assertIn("| evaluations of 100–250 with success (of) | 3 of 4 (0.2, 0.5, 1.0) | 0 of 1 |", lines)
+        self.assertIn("| mean test success, 100–250 | 0.425 | 0.000 |", lines)
+        self.assertIn("| coverage at 100 / 200 episodes | 0.100 / 0.200 | 0.100 / 0.200 |", lines)
+        # A folder without evaluations, and a reversed window, are refused.
+        empty = os.path.join(self.tmp.name, "empty")
+        os.makedirs(empty)
+        for args in (["--window", "9-1", a], [a, empty]):
+            done = subprocess.run([sys.executable, script, *args], capture_output=True, text=True)
+            self.assertNotEqual(done.returncode, 0, args)
+        self.assertIn("no eval.jsonl", done.stderr)
 
 
 if __name__ == "__main__":
