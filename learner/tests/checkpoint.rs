@@ -86,6 +86,22 @@ fn losses(l: &Learner) -> Vec<(&'static str, f64)> {
         .collect()
 }
 
+/// The values of the U8 or I64 tensor `name` of a safetensors file.
+fn i64_or_u8_values(file: &Path, name: &str) -> Vec<i64> {
+    let bytes = fs::read(file).unwrap();
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let view = st.tensor(name).unwrap();
+    match view.dtype() {
+        safetensors::Dtype::U8 => view.data().iter().map(|&b| i64::from(b)).collect(),
+        safetensors::Dtype::I64 => view
+            .data()
+            .chunks_exact(8)
+            .map(|b| i64::from_le_bytes(b.try_into().unwrap()))
+            .collect(),
+        other => panic!("{name} is {other:?}"),
+    }
+}
+
 #[test]
 fn a_restored_learner_writes_the_same_files_and_trains_on_exactly_like_the_original() {
     let dir = scratch("round-trip");
@@ -126,6 +142,21 @@ fn a_restored_learner_writes_the_same_files_and_trains_on_exactly_like_the_origi
     let si_len = original.self_imitation().buffer().len();
     assert!(si_len > 0, "the SI buffer holds entries");
     assert_eq!(restored.self_imitation().buffer().len(), si_len);
+    let (a, b) = (
+        original.self_imitation().buffer().parts(),
+        restored.self_imitation().buffer().parts(),
+    );
+    assert_eq!((a.obs, a.goal, a.episode), (b.obs, b.goal, b.episode));
+    // Format 3 wrote most next observations and SI observations as references, and some not:
+    // the episodes' last steps; the SI entries of runs the φ store (256 states) evicted.
+    let flags = i64_or_u8_values(&saved.path.join("replay_low.safetensors"), "follows");
+    assert!(flags.contains(&1) && flags.contains(&0), "{flags:?}");
+    let sources = i64_or_u8_values(&saved.path.join("si.safetensors"), "obs_source");
+    assert_eq!(sources.len(), si_len);
+    assert!(
+        sources.contains(&-1) && sources.iter().any(|&s| s >= 0),
+        "{sources:?}"
+    );
     assert_eq!(restored.si_pending(), original.si_pending());
     assert_eq!(restored.low_replay().ring(), original.low_replay().ring());
     assert_eq!(restored.high_replay().ring(), original.high_replay().ring());

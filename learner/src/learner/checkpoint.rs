@@ -11,7 +11,7 @@
 //! | `optim.safetensors` | Adam m and v of every optimiser, log α; step counts in metadata |
 //! | `replay_low.safetensors`, `replay_high.safetensors` | buffer columns, rows `0..len` (next observations only where they are not the next row's: [`LOW_SUCCESSORS`]); ring in metadata |
 //! | `phi_store.safetensors` | φ store runs (observations, priorities); run lengths and stats in metadata |
-//! | `si.safetensors` | self-imitation buffer (entries, episode serials, start states); due rounds and counters in metadata |
+//! | `si.safetensors` | self-imitation buffer (entries — their observations as indices into the φ store's where it holds them: [`shared`] —, episode serials, start states); due rounds and counters in metadata |
 //! | `state.json` | counters, publication bookkeeping, schedule, generators, φ trainer scalars |
 //! | `manifest.json` | format and protocol versions, layout hash, config fingerprint, size and checksum of each file above |
 //!
@@ -58,6 +58,8 @@ use crate::sac::SacStats;
 use crate::si::losses::SiLossStats;
 use crate::si::{SiBuffer, SiBufferParts, SiStats};
 use nets::TaskDims;
+
+mod shared;
 
 /// Version of the checkpoint format; a newer one is refused. Format 3 writes the replay
 /// buffers' next observations only where they are not the next row's observation
@@ -716,8 +718,13 @@ fn restore_phi_store(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
     l.phi_store.restore(runs, stats)
 }
 
-/// The SI buffer's arrays (`obs`, `goal`, `starts` as F32, `episode` serials as I64); the
-/// serials, due rounds and counters in metadata.
+/// Name of the SI file's tensor (I64) of each entry's observation in the φ store
+/// ([`shared`]; format 3): `obs` then holds only the entries the store does not.
+const OBS_SOURCE: &str = "obs_source";
+
+/// The SI buffer's arrays (`obs` of the entries the φ store does not hold, `goal`, `starts` as
+/// F32, `obs_source` and `episode` serials as I64); the serials, due rounds and counters in
+/// metadata. Written after the φ store, and restored after it.
 fn save_si(l: &Learner) -> Result<Vec<u8>, String> {
     let si = &l.si;
     let p = si.buffer().parts();
@@ -755,8 +762,15 @@ fn save_si(l: &Learner) -> Result<Vec<u8>, String> {
         ),
     ]);
     let n = episode.len();
+    let runs: Vec<&[f32]> = l.phi_store.runs().map(|(obs, _)| obs).collect();
+    let (obs_dim, _) = si.buffer().dims();
+    let shared = shared::share(&runs, p.obs, p.episode, obs_dim);
     let tensors = vec![
-        f32_tensor("obs", p.obs.to_vec())?,
+        f32_tensor("obs", shared.literal)?,
+        (
+            OBS_SOURCE.to_owned(),
+            Tensor::from_vec(shared.sources, n, &Device::Cpu).map_err(|e| e.to_string())?,
+        ),
         f32_tensor("goal", p.goal.to_vec())?,
         f32_tensor("starts", p.starts.to_vec())?,
         (
@@ -782,7 +796,18 @@ fn restore_si(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
             .map(|v| v.shape().iter().product::<usize>())
             .map_err(|_| format!("tensor `{name}` is missing"))
     };
+    let (obs_dim, goal_dim) = l.si.buffer().dims();
     let obs = f32_array(&st, "obs", len_of("obs")?)?;
+    let obs = match st.tensor(OBS_SOURCE) {
+        // Format 3: the observations the φ store (restored before) holds are taken from it.
+        Ok(_) => {
+            let sources: Vec<i64> = array(&st, OBS_SOURCE, None)?;
+            let runs: Vec<&[f32]> = l.phi_store.runs().map(|(obs, _)| obs).collect();
+            shared::unshare(&runs, &sources, &obs, obs_dim)?
+        }
+        // Formats 1–2: every entry's observation.
+        Err(_) => obs,
+    };
     let goal = f32_array(&st, "goal", len_of("goal")?)?;
     let starts = f32_array(&st, "starts", len_of("starts")?)?;
     let view = st
@@ -803,7 +828,6 @@ fn restore_si(l: &mut Learner, bytes: &[u8]) -> Result<(), String> {
         serde_json::from_str(metadata.get("stats").ok_or("metadata `stats` is missing")?)
             .map_err(|e| format!("metadata `stats`: {e}"))?;
     let current = l.si.buffer();
-    let (obs_dim, goal_dim) = current.dims();
     let parts = SiBufferParts {
         obs: &obs,
         goal: &goal,
