@@ -85,12 +85,7 @@ fn resave(run_dir: &std::path::Path) -> Result<(), AnyError> {
     };
     let env = envs::make_with(&config.env.task, options)?;
     let spec = env.spec();
-    let dims = TaskDims {
-        obs_dim: spec.obs_dim,
-        goal_dim: spec.goal_dim,
-        action_dim: spec.action_dim,
-        action_scale: f64::from(spec.action_high.iter().copied().fold(0.0f32, f32::max)),
-    };
+    let dims = learner::setup::task_dims(spec);
     let checkpoints = run_dir.join("checkpoints");
     let start = Instant::now();
     let (learner, original) = Learner::restore_latest(&config, dims, &checkpoints)?

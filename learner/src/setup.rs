@@ -13,7 +13,7 @@ use candle_nn::VarMap;
 use nets::weights::vars_under;
 use nets::{
     prefix, seeded_var_builder, DeterministicActor, DistanceCritic, GaussianPolicy, LowCritic,
-    LowPolicy, NetsSpec, PolicySet, TwinCritic,
+    LowPolicy, NetsSpec, PolicySet, TaskDims, TwinCritic,
 };
 use protocol::Config;
 
@@ -86,6 +86,17 @@ impl LowLevel {
             Self::Sac(level) => level.optimizers_mut(),
             Self::Deterministic(level) => (level.optimizers_mut(), None),
         }
+    }
+}
+
+/// The sizes the networks are built for, from a task's spec: its observation, goal and action
+/// dimensions, and its largest action bound as the low level's symmetric action scale.
+pub fn task_dims(spec: &envs::EnvSpec) -> TaskDims {
+    TaskDims {
+        obs_dim: spec.obs_dim,
+        goal_dim: spec.goal_dim,
+        action_dim: spec.action_dim,
+        action_scale: f64::from(spec.action_high.iter().copied().fold(0.0f32, f32::max)),
     }
 }
 

@@ -36,12 +36,7 @@ pub fn task_info(config: &Config) -> anyhow::Result<TaskInfo> {
     let env = envs::make_with(&config.env.task, options)
         .with_context(|| format!("building task `{}`", config.env.task))?;
     let spec = env.spec();
-    let dims = TaskDims {
-        obs_dim: spec.obs_dim,
-        goal_dim: spec.goal_dim,
-        action_dim: spec.action_dim,
-        action_scale: f64::from(spec.action_high.iter().copied().fold(0.0f32, f32::max)),
-    };
+    let dims = learner::setup::task_dims(spec);
     let layout = StepLayout::new(
         spec.obs_dim,
         spec.action_dim,
