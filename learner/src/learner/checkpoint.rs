@@ -407,29 +407,16 @@ fn save_columns(
     successors: &[(&str, &str)],
 ) -> Result<Vec<u8>, String> {
     let len = ring.len();
-    let named = |name: &str| {
-        columns
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, col)| *col)
-            .ok_or_else(|| format!("no column `{name}`"))
-    };
-    let pairs = successors
-        .iter()
-        .map(|&(derived, source)| {
-            let (d, s) = (named(derived)?, named(source)?);
-            if d.width() != s.width() {
-                return Err(format!("`{derived}` and `{source}` differ in width"));
-            }
-            Ok((d, s))
-        })
-        .collect::<Result<Vec<_>, String>>()?;
+    let shape: Vec<(&str, usize)> = columns.iter().map(|(n, c)| (*n, c.width())).collect();
+    let pairs = successor_pairs(&shape, successors)?;
     let follows: Vec<u8> = (0..len)
         .map(|i| {
-            let same = |(d, s): &(&Column, &Column)| {
-                successor(ring, i).is_some_and(|j| bitwise_equal(d.row(i), s.row(j)))
-            };
-            u8::from(!pairs.is_empty() && pairs.iter().all(same))
+            let follows = successor(ring, i).is_some_and(|j| {
+                pairs
+                    .iter()
+                    .all(|&(d, s, _)| bitwise_equal(columns[d].1.row(i), columns[s].1.row(j)))
+            });
+            u8::from(!pairs.is_empty() && follows)
         })
         .collect();
     let tensor = |name: &str, rows: usize, width: usize, values: Vec<f32>| {
@@ -438,8 +425,8 @@ fn save_columns(
             .map_err(|e| e.to_string())
     };
     let mut tensors = Vec::with_capacity(columns.len() + 1);
-    for (name, col) in columns {
-        let (rows, values) = if successors.iter().any(|(d, _)| d == name) {
+    for (k, (name, col)) in columns.iter().enumerate() {
+        let (rows, values) = if pairs.iter().any(|&(d, _, _)| d == k) {
             let kept = (0..len).filter(|&i| follows[i] == 0);
             let values: Vec<f32> = kept.flat_map(|i| col.row(i).iter().copied()).collect();
             (values.len() / col.width().max(1), values)
@@ -448,7 +435,7 @@ fn save_columns(
         };
         tensors.push(tensor(name, rows, col.width(), values)?);
     }
-    if !successors.is_empty() {
+    if !pairs.is_empty() {
         let flags = Tensor::from_vec(follows, len, &Device::Cpu).map_err(|e| e.to_string())?;
         tensors.push((FOLLOWS.to_owned(), flags));
     }
@@ -459,6 +446,30 @@ fn save_columns(
         ("total".to_owned(), ring.total().to_string()),
     ]);
     serialize(tensors, metadata)
+}
+
+/// `(derived, source, width)` of each pair of `successors`, as indices into `columns`
+/// (`(name, width)`); an error for a name that is no column or a pair whose widths differ.
+fn successor_pairs(
+    columns: &[(&str, usize)],
+    successors: &[(&str, &str)],
+) -> Result<Vec<(usize, usize, usize)>, String> {
+    let index = |name: &str| {
+        columns
+            .iter()
+            .position(|(n, _)| *n == name)
+            .ok_or_else(|| format!("no column `{name}`"))
+    };
+    successors
+        .iter()
+        .map(|&(derived, source)| {
+            let (d, s) = (index(derived)?, index(source)?);
+            if columns[d].1 != columns[s].1 {
+                return Err(format!("`{derived}` and `{source}` differ in width"));
+            }
+            Ok((d, s, columns[d].1))
+        })
+        .collect()
 }
 
 /// The row written after row `i` (physical index; rows `0..len` valid), if any: `None` for
@@ -501,21 +512,16 @@ fn restore_columns(
         Ok(_) => Some(array::<u8>(&st, FOLLOWS, Some(len))?),
         Err(_) => None,
     };
-    let width = |name: &str| {
-        columns
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, col)| col.width())
-            .ok_or_else(|| format!("no column `{name}`"))
-    };
-    let mut data: HashMap<&str, Vec<f32>> = HashMap::new();
-    for (name, col) in &columns {
-        let derived = successors.iter().any(|(d, _)| d == name);
+    let shape: Vec<(&str, usize)> = columns.iter().map(|(n, c)| (*n, c.width())).collect();
+    let pairs = successor_pairs(&shape, successors)?;
+    let mut data: Vec<Vec<f32>> = Vec::with_capacity(columns.len());
+    for (k, &(name, width)) in shape.iter().enumerate() {
+        let derived = pairs.iter().any(|&(d, _, _)| d == k);
         let rows = match (&follows, derived) {
             (Some(f), true) => f.iter().filter(|&&x| x == 0).count(),
             _ => len,
         };
-        data.insert(*name, f32_array(&st, name, rows * col.width())?);
+        data.push(f32_array(&st, name, rows * width)?);
     }
     if let Some(follows) = &follows {
         if let Some(bad) = follows.iter().position(|&x| x > 1) {
@@ -524,13 +530,8 @@ fn restore_columns(
                 follows[bad]
             ));
         }
-        for &(derived, source) in successors {
-            let w = width(derived)?;
-            if width(source)? != w {
-                return Err(format!("`{derived}` and `{source}` differ in width"));
-            }
-            let kept = &data[derived];
-            let from = &data[source];
+        for &(d, s, w) in &pairs {
+            let (kept, from) = (&data[d], &data[s]);
             let mut whole = Vec::with_capacity(len * w);
             let mut next_kept = kept.chunks_exact(w.max(1));
             for (i, &flag) in follows.iter().enumerate() {
@@ -541,15 +542,17 @@ fn restore_columns(
                         })?;
                         &from[j * w..(j + 1) * w]
                     }
+                    // Invariant: `kept` was read with exactly one row per 0 flag, so it never
+                    // runs out here.
                     _ => next_kept.next().unwrap_or(&[]),
                 };
                 whole.extend_from_slice(row);
             }
-            data.insert(derived, whole);
+            data[d] = whole;
         }
     }
-    for (name, col) in columns {
-        col.import_rows(&data[name]);
+    for ((_, col), values) in columns.into_iter().zip(&data) {
+        col.import_rows(values);
     }
     *ring = restored;
     Ok(())

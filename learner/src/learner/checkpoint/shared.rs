@@ -94,6 +94,7 @@ pub(super) fn unshare(
     let mut obs = Vec::with_capacity(sources.len() * dim);
     for (entry, &source) in sources.iter().enumerate() {
         let row = match source {
+            // Invariant: `literal` holds one row per LITERAL source (checked above).
             LITERAL => literal_rows.next().unwrap_or(&[]),
             s => {
                 let flat = usize::try_from(s)
